@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# The project's test command (README, CI): installs what the tests need, then runs formatting,
+# lints, the Rust tests (unit, property, end-to-end with the real binaries) and the Python tests
+# of the training code.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+bash scripts/fetch-onnxruntime.sh
+bash models/training/setup.sh
+
+echo "== cargo fmt --check"
+cargo fmt --all --check
+echo "== cargo clippy"
+cargo clippy --workspace --all-targets -- -D warnings
+echo "== cargo test"
+cargo test --workspace
+echo "== pytest (models/training)"
+models/training/.venv/bin/python -m pytest -q models/training/tests
