@@ -1,0 +1,1 @@
+"""Training, export and evaluation of evgate's motion-aware event suppression network."""

@@ -1,0 +1,59 @@
+"""Training checkpoints: weights, optimiser, step, configuration and data manifest hash."""
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from .network import NetworkConfig, SuppressionNetwork
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file that cannot be read or lacks a field."""
+
+
+@dataclass
+class Checkpoint:
+    network: SuppressionNetwork
+    step: int
+    manifest_sha256: str
+    optimiser_state: dict | None
+    train_config: dict
+
+
+def save_checkpoint(path: Path, network: SuppressionNetwork, optimiser, step: int, manifest_sha256: str, train_config: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_suffix(".tmp")
+    torch.save(
+        {
+            "network_config": dataclasses.asdict(network.config),
+            "weights": network.state_dict(),
+            "optimiser": optimiser.state_dict() if optimiser is not None else None,
+            "step": step,
+            "manifest_sha256": manifest_sha256,
+            "train_config": train_config,
+        },
+        temporary,
+    )
+    # Rename last so an interrupted save never leaves a truncated checkpoint behind.
+    temporary.replace(path)
+
+
+def load_checkpoint(path: Path) -> Checkpoint:
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=False)
+    except (OSError, RuntimeError) as error:
+        raise CheckpointError(f"{path}: cannot read checkpoint: {error}") from error
+    for field in ("network_config", "weights", "step", "manifest_sha256"):
+        if field not in payload:
+            raise CheckpointError(f"{path}: checkpoint lacks field {field!r}")
+    network = SuppressionNetwork(NetworkConfig(**payload["network_config"]))
+    network.load_state_dict(payload["weights"])
+    return Checkpoint(
+        network=network,
+        step=int(payload["step"]),
+        manifest_sha256=payload["manifest_sha256"],
+        optimiser_state=payload.get("optimiser"),
+        train_config=payload.get("train_config", {}),
+    )

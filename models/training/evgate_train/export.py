@@ -1,0 +1,124 @@
+"""Exports a trained network to ONNX following docs/model-contract.md.
+
+    python -m evgate_train.export --checkpoint runs/S/checkpoint.pt --output ../evgate-S.onnx
+    python -m evgate_train.export --size XS --untrained --output /tmp/evgate-XS-untrained.onnx
+"""
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+import onnx
+import torch
+from torch import nn
+
+from .checkpoint import load_checkpoint
+from .network import NetworkConfig, SuppressionNetwork, check_input_size
+from .voxel import WINDOW_US
+
+MAX_HORIZON_MS = 100
+OPSET = 18
+STATE_COUNT = 4
+INPUT_NAMES = ["voxel", "horizons_ms"] + [f"state_{i}" for i in range(STATE_COUNT)]
+OUTPUT_NAMES = ["mask_logits", "future_mask_logits", "future_flow"] + [f"new_state_{i}" for i in range(STATE_COUNT)]
+
+log = logging.getLogger("evgate_train.export")
+
+
+class ContractWrapper(nn.Module):
+    """The contract's flat signature: one stream (batch 1), horizons [K], states as four inputs."""
+
+    def __init__(self, network: SuppressionNetwork):
+        super().__init__()
+        self.network = network
+
+    def forward(self, voxel, horizons_ms, state_0, state_1, state_2, state_3):
+        out = self.network(voxel, horizons_ms.unsqueeze(0), [state_0, state_1, state_2, state_3])
+        return (out.mask_logits, out.future_mask_logits, out.future_flow, *out.states)
+
+
+def example_inputs(network: SuppressionNetwork, height: int, width: int, horizons: int = 2) -> tuple[torch.Tensor, ...]:
+    generator = torch.Generator().manual_seed(0)
+    voxel = torch.randn(1, 2, height, width, generator=generator)
+    horizons_ms = torch.linspace(MAX_HORIZON_MS / horizons, MAX_HORIZON_MS, horizons)
+    return (voxel, horizons_ms, *network.initial_states(1, height, width))
+
+
+def export(
+    network: SuppressionNetwork,
+    path: Path,
+    height: int,
+    width: int,
+    manifest_sha256: str,
+    train_steps: int,
+) -> None:
+    check_input_size(height, width)
+    network = network.eval()
+    wrapper = ContractWrapper(network)
+    inputs = example_inputs(network, height, width)
+    horizon_axis = {"horizons_ms": {0: "K"}, "future_mask_logits": {1: "K"}, "future_flow": {1: "K"}}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with torch.no_grad():
+        torch.onnx.export(
+            wrapper,
+            inputs,
+            str(path),
+            input_names=INPUT_NAMES,
+            output_names=OUTPUT_NAMES,
+            dynamic_axes=horizon_axis,
+            opset_version=OPSET,
+            dynamo=False,
+        )
+    model = onnx.load(str(path))
+    config = network.config
+    metadata = {
+        "evgate.model-size": config.size,
+        "evgate.base-channels": str(config.base),
+        "evgate.state-channels": ",".join(str(c) for c in config.state_channels),
+        "evgate.bins": "2",
+        "evgate.window-ms": str(WINDOW_US // 1000),
+        "evgate.input-height": str(height),
+        "evgate.input-width": str(width),
+        "evgate.max-horizon-ms": str(MAX_HORIZON_MS),
+        "evgate.atc": config.time_conditioning,
+        "evgate.train-manifest-sha256": manifest_sha256,
+        "evgate.train-steps": str(train_steps),
+    }
+    del model.metadata_props[:]
+    for key, value in metadata.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--checkpoint", type=Path, help="training checkpoint to export")
+    source.add_argument("--untrained", action="store_true", help="export freshly initialised weights (runtime tests)")
+    parser.add_argument("--size", default="S", help="model size for --untrained: XS, S, M or L")
+    parser.add_argument(
+        "--time-conditioning", default="position-aware", help="for --untrained: position-aware, reference or none"
+    )
+    parser.add_argument("--height", type=int, default=272, help="padded input height (multiple of 16)")
+    parser.add_argument("--width", type=int, default=352, help="padded input width (multiple of 16)")
+    parser.add_argument("--output", type=Path, required=True, help="where to write the .onnx file")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    if args.checkpoint:
+        checkpoint = load_checkpoint(args.checkpoint)
+        network = checkpoint.network
+        manifest, steps = checkpoint.manifest_sha256, checkpoint.step
+    else:
+        torch.manual_seed(0)
+        network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
+        manifest, steps = "untrained", 0
+    export(network, args.output, args.height, args.width, manifest, steps)
+    log.info("wrote %s (%s, %dx%d, %d steps)", args.output, network.config.size, args.width, args.height, steps)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
