@@ -8,4 +8,5 @@ pub mod hungarian;
 pub mod instances;
 pub mod linear;
 pub mod oms;
+pub mod plot;
 pub mod segmentation;
