@@ -11,7 +11,16 @@ pub type Polarity = u8;
 /// be placed in shared memory and cast to bytes without copying.
 #[repr(C)]
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, bytemuck::Pod, bytemuck::Zeroable, ZeroCopySend,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Hash,
+    bytemuck::Pod,
+    bytemuck::Zeroable,
+    ZeroCopySend,
 )]
 #[type_name("evgate::Event/v1")]
 pub struct Event {

@@ -53,8 +53,14 @@ mod tests {
 
     #[test]
     fn padding_rounds_up_to_multiple() {
-        assert_eq!(SensorSize::new(346, 260).padded_to(16), SensorSize::new(352, 272));
-        assert_eq!(SensorSize::new(640, 480).padded_to(16), SensorSize::new(640, 480));
+        assert_eq!(
+            SensorSize::new(346, 260).padded_to(16),
+            SensorSize::new(352, 272)
+        );
+        assert_eq!(
+            SensorSize::new(640, 480).padded_to(16),
+            SensorSize::new(640, 480)
+        );
     }
 
     #[test]

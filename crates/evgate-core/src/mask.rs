@@ -1,0 +1,325 @@
+//! Binary pixel masks packed one bit per pixel (row-major, least significant bit first), the
+//! form in which masks travel through shared memory and are looked up by the gate.
+
+use crate::geometry::SensorSize;
+
+/// Why a mask could not be built or changed.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum MaskError {
+    #[error("mask needs a non-empty size, got {size}")]
+    EmptySize { size: SensorSize },
+    #[error("logit row stride {row_stride} is smaller than the mask width {width}")]
+    StrideTooSmall { row_stride: usize, width: u16 },
+    #[error(
+        "logit map has {actual} values, a {size} mask with row stride {row_stride} needs at \
+         least {required}"
+    )]
+    TooFewLogits {
+        actual: usize,
+        required: usize,
+        size: SensorSize,
+        row_stride: usize,
+    },
+    #[error("a {size} mask takes {expected} u64 words, got {actual}")]
+    WordCount {
+        expected: usize,
+        actual: usize,
+        size: SensorSize,
+    },
+    #[error("word {word} sets bits beyond the last pixel of a {size} mask")]
+    BitsBeyondLastPixel { word: usize, size: SensorSize },
+    #[error("pixel ({x}, {y}) lies outside the {size} mask")]
+    PixelOutside { x: u16, y: u16, size: SensorSize },
+}
+
+/// Number of u64 words holding one bit per pixel of `size`.
+pub const fn words_for(size: SensorSize) -> usize {
+    size.pixels().div_ceil(64)
+}
+
+fn validate_words(size: SensorSize, words: &[u64]) -> Result<(), MaskError> {
+    if size.pixels() == 0 {
+        return Err(MaskError::EmptySize { size });
+    }
+    let expected = words_for(size);
+    if words.len() != expected {
+        return Err(MaskError::WordCount {
+            expected,
+            actual: words.len(),
+            size,
+        });
+    }
+    let used_bits = size.pixels() % 64;
+    if used_bits != 0 && words[expected - 1] >> used_bits != 0 {
+        return Err(MaskError::BitsBeyondLastPixel {
+            word: expected - 1,
+            size,
+        });
+    }
+    Ok(())
+}
+
+/// A borrowed bit mask, e.g. over words that live in shared memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MaskView<'a> {
+    size: SensorSize,
+    words: &'a [u64],
+}
+
+impl<'a> MaskView<'a> {
+    /// Views `words` as a mask of `size`; the word count must be [`words_for`]`(size)` and the
+    /// bits past the last pixel must be zero.
+    pub fn new(size: SensorSize, words: &'a [u64]) -> Result<Self, MaskError> {
+        validate_words(size, words)?;
+        Ok(Self { size, words })
+    }
+
+    pub fn size(&self) -> SensorSize {
+        self.size
+    }
+
+    pub fn as_words(&self) -> &'a [u64] {
+        self.words
+    }
+
+    /// The bit of pixel (x, y); pixels outside the mask read as not set.
+    pub fn get(&self, x: u16, y: u16) -> bool {
+        if x >= self.size.width || y >= self.size.height {
+            return false;
+        }
+        let index = self.size.index(x, y);
+        self.words[index / 64] >> (index % 64) & 1 == 1
+    }
+
+    /// Number of set pixels.
+    pub fn count_ones(&self) -> usize {
+        self.words
+            .iter()
+            .map(|word| word.count_ones() as usize)
+            .sum()
+    }
+}
+
+/// An owned bit mask.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BitMask {
+    size: SensorSize,
+    words: Vec<u64>,
+}
+
+impl BitMask {
+    /// An all-clear mask.
+    pub fn new(size: SensorSize) -> Result<Self, MaskError> {
+        if size.pixels() == 0 {
+            return Err(MaskError::EmptySize { size });
+        }
+        Ok(Self {
+            size,
+            words: vec![0; words_for(size)],
+        })
+    }
+
+    /// Thresholds a logit map: pixel (x, y) is set when `logits[y · row_stride + x] >
+    /// threshold_logit` (NaN is never set). With a threshold of 0 this is sigmoid(l) > 0.5,
+    /// the paper's prediction rule. `row_stride` lets the map be wider than the mask, as the
+    /// network's padded output is.
+    pub fn from_logits(
+        logits: &[f32],
+        size: SensorSize,
+        row_stride: usize,
+        threshold_logit: f32,
+    ) -> Result<Self, MaskError> {
+        let mut mask = Self::new(size)?;
+        mask.fill_from_logits(logits, row_stride, threshold_logit)?;
+        Ok(mask)
+    }
+
+    /// [`from_logits`](Self::from_logits) into this mask's buffer, without allocating.
+    pub fn fill_from_logits(
+        &mut self,
+        logits: &[f32],
+        row_stride: usize,
+        threshold_logit: f32,
+    ) -> Result<(), MaskError> {
+        let size = self.size;
+        let width = usize::from(size.width);
+        if row_stride < width {
+            return Err(MaskError::StrideTooSmall {
+                row_stride,
+                width: size.width,
+            });
+        }
+        let required = (usize::from(size.height) - 1) * row_stride + width;
+        if logits.len() < required {
+            return Err(MaskError::TooFewLogits {
+                actual: logits.len(),
+                required,
+                size,
+                row_stride,
+            });
+        }
+        self.words.fill(0);
+        let mut index = 0usize;
+        for row in logits.chunks(row_stride).take(usize::from(size.height)) {
+            for &logit in &row[..width] {
+                self.words[index / 64] |= u64::from(logit > threshold_logit) << (index % 64);
+                index += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Takes ownership of packed words (see [`MaskView::new`] for the checks).
+    pub fn from_words(size: SensorSize, words: Vec<u64>) -> Result<Self, MaskError> {
+        validate_words(size, &words)?;
+        Ok(Self { size, words })
+    }
+
+    pub fn view(&self) -> MaskView<'_> {
+        MaskView {
+            size: self.size,
+            words: &self.words,
+        }
+    }
+
+    pub fn size(&self) -> SensorSize {
+        self.size
+    }
+
+    pub fn as_words(&self) -> &[u64] {
+        &self.words
+    }
+
+    /// The bit of pixel (x, y); pixels outside the mask read as not set.
+    pub fn get(&self, x: u16, y: u16) -> bool {
+        self.view().get(x, y)
+    }
+
+    /// Sets or clears pixel (x, y).
+    pub fn set(&mut self, x: u16, y: u16, value: bool) -> Result<(), MaskError> {
+        if x >= self.size.width || y >= self.size.height {
+            return Err(MaskError::PixelOutside {
+                x,
+                y,
+                size: self.size,
+            });
+        }
+        let index = self.size.index(x, y);
+        let bit = 1u64 << (index % 64);
+        if value {
+            self.words[index / 64] |= bit;
+        } else {
+            self.words[index / 64] &= !bit;
+        }
+        Ok(())
+    }
+
+    /// Number of set pixels.
+    pub fn count_ones(&self) -> usize {
+        self.view().count_ones()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn logits_threshold_at_zero_with_stride() {
+        let size = SensorSize::new(3, 2);
+        // Stride 4: the fourth column is padding and must be ignored.
+        let logits = [
+            0.1,
+            -0.1,
+            0.0,
+            9.0, //
+            f32::NAN,
+            5.0,
+            -3.0,
+            9.0,
+        ];
+        let mask = BitMask::from_logits(&logits, size, 4, 0.0).unwrap();
+        let set: Vec<_> = (0..2)
+            .flat_map(|y| (0..3).map(move |x| (x, y)))
+            .filter(|&(x, y)| mask.get(x, y))
+            .collect();
+        assert_eq!(set, [(0, 0), (1, 1)]);
+        assert_eq!(mask.count_ones(), 2);
+        assert!(!mask.get(3, 0));
+    }
+
+    #[test]
+    fn bad_logit_maps_are_rejected() {
+        let size = SensorSize::new(3, 2);
+        assert_eq!(
+            BitMask::from_logits(&[0.0; 6], size, 2, 0.0).unwrap_err(),
+            MaskError::StrideTooSmall {
+                row_stride: 2,
+                width: 3
+            }
+        );
+        assert!(matches!(
+            BitMask::from_logits(&[0.0; 6], size, 4, 0.0),
+            Err(MaskError::TooFewLogits {
+                actual: 6,
+                required: 7,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn words_are_validated() {
+        let size = SensorSize::new(10, 7);
+        assert_eq!(words_for(size), 2);
+        assert!(matches!(
+            BitMask::from_words(size, vec![0]),
+            Err(MaskError::WordCount {
+                expected: 2,
+                actual: 1,
+                ..
+            })
+        ));
+        assert!(matches!(
+            MaskView::new(size, &[0, 1 << 6]),
+            Err(MaskError::BitsBeyondLastPixel { word: 1, .. })
+        ));
+        assert!(MaskView::new(size, &[0, 1 << 5]).unwrap().get(9, 6));
+    }
+
+    #[test]
+    fn set_outside_is_an_error() {
+        let mut mask = BitMask::new(SensorSize::new(4, 4)).unwrap();
+        assert!(matches!(
+            mask.set(4, 0, true),
+            Err(MaskError::PixelOutside { x: 4, y: 0, .. })
+        ));
+    }
+
+    proptest! {
+        #[test]
+        fn set_get_and_word_round_trip(
+            width in 1u16..80, height in 1u16..20,
+            pixels in prop::collection::vec((0u16..80, 0u16..20, any::<bool>()), 0..100),
+        ) {
+            let size = SensorSize::new(width, height);
+            let mut mask = BitMask::new(size).unwrap();
+            let mut expected = vec![false; size.pixels()];
+            for (x, y, value) in pixels {
+                if x < width && y < height {
+                    mask.set(x, y, value).unwrap();
+                    expected[size.index(x, y)] = value;
+                }
+            }
+            for y in 0..height {
+                for x in 0..width {
+                    prop_assert_eq!(mask.get(x, y), expected[size.index(x, y)]);
+                }
+            }
+            prop_assert_eq!(mask.count_ones(), expected.iter().filter(|&&b| b).count());
+            let copy = BitMask::from_words(size, mask.as_words().to_vec()).unwrap();
+            prop_assert_eq!(&copy, &mask);
+        }
+    }
+}
