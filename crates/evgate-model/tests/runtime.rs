@@ -1,0 +1,285 @@
+//! The runtime against a real exported network: the committed `models/evgate-S.onnx`
+//! (`EVGATE_TEST_MODEL=/path/to/model.onnx` points these tests at another export).
+
+use std::path::PathBuf;
+
+use evgate_model::{ModelError, ModelRuntime, RuntimeOptions};
+
+const COMMITTED_MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/evgate-S.onnx");
+
+fn model_path() -> PathBuf {
+    let path = std::env::var_os("EVGATE_TEST_MODEL")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(COMMITTED_MODEL));
+    assert!(
+        path.is_file(),
+        "these tests need the exported network {} (committed as models/evgate-S.onnx; \
+         EVGATE_TEST_MODEL overrides the path) and it is missing",
+        path.display()
+    );
+    path
+}
+
+fn load() -> ModelRuntime {
+    ModelRuntime::load(model_path(), RuntimeOptions::default()).unwrap()
+}
+
+/// Deterministic voxel-like input: sparse ±values as a normalised voxel grid would hold.
+fn pseudo_voxel(length: usize, seed: u64) -> Vec<f32> {
+    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..length)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            match x % 10 {
+                0 => 1.5,
+                1 => -1.5,
+                _ => 0.0,
+            }
+        })
+        .collect()
+}
+
+fn voxel_length(runtime: &ModelRuntime) -> usize {
+    let size = runtime.input_size();
+    2 * size.pixels()
+}
+
+const HORIZONS: [f32; 3] = [10.0, 50.0, 100.0];
+
+fn max_abs_difference(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn outputs_have_the_contract_shapes() {
+    let mut runtime = load();
+    let size = runtime.input_size();
+    assert_eq!(size.width % 16, 0);
+    assert_eq!(size.height % 16, 0);
+    let plane = size.pixels();
+    let voxel = pseudo_voxel(voxel_length(&runtime), 1);
+    let output = runtime.forecast(&voxel, &HORIZONS).unwrap();
+    assert_eq!(output.width(), usize::from(size.width));
+    assert_eq!(output.height(), usize::from(size.height));
+    assert_eq!(output.mask_logits().len(), plane);
+    assert_eq!(output.horizons_ms(), HORIZONS);
+    let futures: Vec<&[f32]> = output.future_mask_logits().collect();
+    assert_eq!(futures.len(), HORIZONS.len());
+    assert!(futures.iter().all(|f| f.len() == plane));
+    let flows: Vec<(&[f32], &[f32])> = output.future_flows().collect();
+    assert_eq!(flows.len(), HORIZONS.len());
+    assert!(flows
+        .iter()
+        .all(|(dx, dy)| dx.len() == plane && dy.len() == plane));
+    assert!(output.mask_logits().iter().all(|v| v.is_finite()));
+    assert!(!output.inference_time().is_zero());
+    assert_eq!(runtime.windows_carried(), 1);
+}
+
+#[test]
+fn state_is_carried_between_windows_and_reset_forgets_it() {
+    let mut runtime = load();
+    let first = pseudo_voxel(voxel_length(&runtime), 1);
+    let second = pseudo_voxel(voxel_length(&runtime), 2);
+
+    runtime.forecast(&first, &HORIZONS).unwrap();
+    let with_history = runtime
+        .forecast(&second, &HORIZONS)
+        .unwrap()
+        .mask_logits()
+        .to_vec();
+    assert_eq!(runtime.windows_carried(), 2);
+
+    runtime.reset_state().unwrap();
+    assert_eq!(runtime.windows_carried(), 0);
+    let without_history = runtime
+        .forecast(&second, &HORIZONS)
+        .unwrap()
+        .mask_logits()
+        .to_vec();
+    assert!(
+        max_abs_difference(&with_history, &without_history) > 1e-4,
+        "the second window gave the same logits with and without the first one before it"
+    );
+
+    runtime.reset_state().unwrap();
+    runtime.forecast(&first, &HORIZONS).unwrap();
+    let replayed = runtime
+        .forecast(&second, &HORIZONS)
+        .unwrap()
+        .mask_logits()
+        .to_vec();
+    assert!(
+        max_abs_difference(&with_history, &replayed) < 1e-4,
+        "replaying the same two windows after a reset gave different logits"
+    );
+}
+
+#[test]
+fn horizons_change_the_forecast() {
+    let mut runtime = load();
+    let voxel = pseudo_voxel(voxel_length(&runtime), 3);
+    let output = runtime.forecast(&voxel, &[0.0, 100.0]).unwrap();
+    let flows: Vec<(&[f32], &[f32])> = output.future_flows().collect();
+    // Flow is velocity × horizon, so a zero horizon predicts no displacement.
+    assert!(flows[0].0.iter().chain(flows[0].1).all(|v| v.abs() < 1e-4));
+    assert!(flows[1].0.iter().chain(flows[1].1).any(|v| v.abs() > 1e-6));
+}
+
+#[test]
+fn bad_inputs_are_errors_and_leave_the_state_alone() {
+    let mut runtime = load();
+    let length = voxel_length(&runtime);
+    let voxel = pseudo_voxel(length, 4);
+
+    let error = runtime
+        .forecast(&voxel[..length - 1], &HORIZONS)
+        .unwrap_err();
+    assert!(matches!(error, ModelError::VoxelLength { .. }), "{error}");
+    let message = error.to_string();
+    assert!(message.contains(&(length - 1).to_string()) && message.contains(&length.to_string()));
+
+    let error = runtime.forecast(&voxel, &[]).unwrap_err();
+    assert!(matches!(error, ModelError::NoHorizons), "{error}");
+
+    let error = runtime.forecast(&voxel, &[10.0, 250.0]).unwrap_err();
+    let message = error.to_string();
+    assert!(
+        message.contains("#1") && message.contains("250"),
+        "{message}"
+    );
+
+    let error = runtime.forecast(&voxel, &[f32::NAN]).unwrap_err();
+    assert!(
+        matches!(error, ModelError::HorizonOutOfRange { index: 0, .. }),
+        "{error}"
+    );
+
+    assert_eq!(runtime.windows_carried(), 0);
+}
+
+#[test]
+fn missing_model_file_is_named() {
+    let missing = std::env::temp_dir().join("evgate-no-such-model.onnx");
+    let error = ModelRuntime::load(&missing, RuntimeOptions::default())
+        .err()
+        .unwrap();
+    assert!(
+        error.to_string().contains(&missing.display().to_string()),
+        "{error}"
+    );
+}
+
+/// The model's bytes with the value of metadata entry `key` changed by `edit`. Protobuf
+/// stores the entry as key bytes, then tag 0x12 and a one-byte length for a short value; a
+/// same-length edit keeps every enclosing length valid.
+fn edit_metadata(key: &str, edit: impl Fn(&mut [u8], &mut [u8])) -> Vec<u8> {
+    let mut bytes = std::fs::read(model_path()).unwrap();
+    let start = bytes
+        .windows(key.len())
+        .position(|window| window == key.as_bytes())
+        .unwrap_or_else(|| panic!("metadata key {key} not found in the model file"));
+    let key_end = start + key.len();
+    assert_eq!(bytes[key_end], 0x12, "metadata value tag after {key}");
+    let value_length = usize::from(bytes[key_end + 1]);
+    let (head, tail) = bytes.split_at_mut(key_end);
+    edit(&mut head[start..], &mut tail[2..2 + value_length]);
+    bytes
+}
+
+fn load_bytes(bytes: &[u8]) -> (PathBuf, ModelError, tempfile::TempDir) {
+    let directory = tempfile::tempdir().unwrap();
+    let path = directory.path().join("edited.onnx");
+    std::fs::write(&path, bytes).unwrap();
+    let error = ModelRuntime::load(&path, RuntimeOptions::default())
+        .err()
+        .expect("the edited model loaded");
+    (path, error, directory)
+}
+
+#[test]
+fn a_missing_metadata_key_names_the_file_and_key() {
+    let bytes = edit_metadata("evgate.window-ms", |key, _| {
+        let last = key.len() - 1;
+        key[last] = b'x';
+    });
+    let (path, error, _directory) = load_bytes(&bytes);
+    let message = error.to_string();
+    assert!(message.contains(&path.display().to_string()), "{message}");
+    assert!(
+        message.contains("`evgate.window-ms` is missing"),
+        "{message}"
+    );
+}
+
+#[test]
+fn a_bad_metadata_value_names_the_file_key_value_and_accepted_values() {
+    let bytes = edit_metadata("evgate.atc", |_, value| value.fill(b'q'));
+    let (path, error, _directory) = load_bytes(&bytes);
+    let message = error.to_string();
+    assert!(message.contains(&path.display().to_string()), "{message}");
+    assert!(
+        message.contains("evgate.atc") && message.contains("qqqq"),
+        "{message}"
+    );
+    assert!(
+        message.contains("position-aware, reference, none"),
+        "{message}"
+    );
+}
+
+#[test]
+fn an_input_size_disagreeing_with_the_graph_breaks_the_contract() {
+    // Another multiple of 16 with as many digits: valid on its own, but not the size the graph
+    // was exported for.
+    let bytes = edit_metadata("evgate.input-height", |_, value| {
+        let original = String::from_utf8(value.to_vec()).unwrap();
+        let replacement = (16..)
+            .step_by(16)
+            .map(|side: u32| side.to_string())
+            .find(|side| side.len() == original.len() && *side != original)
+            .unwrap();
+        value.copy_from_slice(replacement.as_bytes());
+    });
+    let (path, error, _directory) = load_bytes(&bytes);
+    let message = error.to_string();
+    assert!(matches!(error, ModelError::Contract { .. }), "{message}");
+    assert!(
+        message.contains(&path.display().to_string()) && message.contains("voxel"),
+        "{message}"
+    );
+}
+
+#[test]
+fn cuda_requests_fall_back_to_cpu_when_cuda_cannot_be_used() {
+    use evgate_model::{ActiveProvider, Provider};
+    for provider in [Provider::Cuda, Provider::Auto] {
+        let options = RuntimeOptions {
+            provider,
+            ..RuntimeOptions::default()
+        };
+        let mut runtime = ModelRuntime::load(model_path(), options).unwrap();
+        if !cuda_library_present() {
+            assert_eq!(runtime.active_provider(), ActiveProvider::Cpu);
+        }
+        let voxel = pseudo_voxel(voxel_length(&runtime), 5);
+        runtime.forecast(&voxel, &HORIZONS).unwrap();
+    }
+}
+
+/// The onnxruntime-gpu wheel ships the CUDA provider as a separate library beside the runtime.
+fn cuda_library_present() -> bool {
+    evgate_model::locate_onnxruntime()
+        .ok()
+        .and_then(|library| {
+            library
+                .parent()
+                .map(|d| d.join("libonnxruntime_providers_cuda.so"))
+        })
+        .is_some_and(|provider| provider.is_file())
+}
