@@ -1,1 +1,36 @@
-//! evgate-ipc
+//! The shared-memory contracts of the evgate pipeline.
+//!
+//! Every process of a pipeline (ingest → infer → gate, plus any consumer) agrees on three things
+//! defined here and nowhere else:
+//!
+//! * the service names, built from a [`PipelineNames`] (`<domain>/<camera>/<stream>`), so several
+//!   pipelines can share one machine and tests can use unique names;
+//! * the payload types ([`BatchHeader`], [`ForecastHeader`], [`PipelineStats`]), `#[repr(C)]`,
+//!   `Pod` and registered with versioned iceoryx2 type names;
+//! * the service limits and port settings ([`Qos`]), so whichever process creates a service
+//!   creates it the way the others open it.
+//!
+//! Publishers pair each sample with an iceoryx2 event notification of the same service name so
+//! readers sleep in a `WaitSet` instead of polling.
+
+pub mod batch;
+pub mod clock;
+pub mod forecast;
+pub mod names;
+pub mod node;
+pub mod ports;
+pub mod qos;
+pub mod stats;
+
+pub use batch::{BatchFlags, BatchHeader};
+pub use forecast::{ForecastError, ForecastHeader, MAX_HORIZONS};
+pub use names::{NameError, PipelineNames, Stream};
+pub use node::{create_node, NodeError};
+pub use ports::{
+    Delivery, LatestPublisher, LatestSubscriber, PortError, SlicePublisher, SliceSubscriber,
+};
+pub use qos::{Overflow, Qos};
+pub use stats::PipelineStats;
+
+/// The iceoryx2 service flavour every evgate process uses: inter-process shared memory.
+pub type Service = iceoryx2::service::ipc::Service;

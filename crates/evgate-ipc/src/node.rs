@@ -1,0 +1,46 @@
+//! Creating the iceoryx2 node of a process.
+
+use iceoryx2::prelude::{Node, NodeBuilder, NodeName};
+use tracing::{info, warn};
+
+use crate::Service;
+
+/// Node creation failures.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error("node name {name:?} is rejected by iceoryx2: {reason}")]
+    InvalidName { name: String, reason: String },
+    #[error("cannot create iceoryx2 node {name:?}: {reason}")]
+    Create { name: String, reason: String },
+}
+
+/// Creates the node of this process and removes the shared-memory resources left by processes
+/// that died without cleaning up (crashed or killed), so a restarted service can reopen its
+/// ports instead of finding them occupied.
+pub fn create_node(name: &str) -> Result<Node<Service>, NodeError> {
+    let node_name = NodeName::new(name).map_err(|error| NodeError::InvalidName {
+        name: name.to_owned(),
+        reason: format!("{error:?}"),
+    })?;
+    let node = NodeBuilder::new()
+        .name(&node_name)
+        .create::<Service>()
+        .map_err(|error| NodeError::Create {
+            name: name.to_owned(),
+            reason: format!("{error:?}"),
+        })?;
+    let cleanup = node.try_cleanup_dead_nodes();
+    if cleanup.cleanups > 0 {
+        info!(
+            removed = cleanup.cleanups,
+            "removed resources of dead iceoryx2 nodes"
+        );
+    }
+    if cleanup.failed_cleanups > 0 {
+        warn!(
+            failed = cleanup.failed_cleanups,
+            "could not remove resources of some dead iceoryx2 nodes"
+        );
+    }
+    Ok(node)
+}

@@ -1,0 +1,485 @@
+//! Publishers and subscribers of the pipeline streams, each paired with the event service of the
+//! same name that wakes readers up.
+
+use std::fmt::Debug;
+use std::time::Duration;
+
+use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::port::{BackpressureAction, BackpressureInfo};
+use iceoryx2::prelude::{AllocationStrategy, Node, ServiceName, ZeroCopySend};
+use iceoryx2::sample::Sample;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+use iceoryx2::service::port_factory::PortFactory as _;
+
+use crate::names::{NameError, PipelineNames, Stream};
+use crate::qos::{Overflow, Qos, ServiceLimits};
+use crate::Service;
+
+/// Port failures; every variant names the service.
+#[derive(Debug, thiserror::Error)]
+pub enum PortError {
+    #[error(transparent)]
+    Name(#[from] NameError),
+    #[error("cannot open or create service {service:?} ({pattern}): {reason}")]
+    Service {
+        service: String,
+        pattern: &'static str,
+        reason: String,
+    },
+    #[error("cannot create {port} on service {service:?}: {reason}")]
+    Port {
+        service: String,
+        port: &'static str,
+        reason: String,
+    },
+    #[error("qos field buffer-size = {value} is out of range: accepted 1..={max}")]
+    BufferSize { value: usize, max: usize },
+    #[error("cannot loan a slice of {len} elements on service {service:?}: {reason}")]
+    Loan {
+        service: String,
+        len: usize,
+        reason: String,
+    },
+    #[error("cannot send on service {service:?}: {reason}")]
+    Send { service: String, reason: String },
+    #[error("cannot receive on service {service:?}: {reason}")]
+    Receive { service: String, reason: String },
+    #[error("cannot notify listeners of service {service:?}: {reason}")]
+    Notify { service: String, reason: String },
+}
+
+/// How one publication went.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Delivery {
+    /// Subscribers the sample reached.
+    pub recipients: usize,
+    /// Subscribers connected when the sample was sent that did not get it (full buffer under
+    /// the overflow policy). A subscriber connecting or leaving during the send may make this
+    /// one off.
+    pub undelivered: usize,
+}
+
+/// Streams readers want the newest sample of (forecasts, stats): the publisher overwrites the
+/// oldest sample of a full subscriber and a late subscriber receives the latest sample.
+fn wants_latest(stream: Stream) -> bool {
+    matches!(stream, Stream::Forecast | Stream::Stats)
+}
+
+fn service_error(service: &ServiceName, pattern: &'static str, reason: impl Debug) -> PortError {
+    PortError::Service {
+        service: service.as_str().to_owned(),
+        pattern,
+        reason: format!("{reason:?}"),
+    }
+}
+
+fn port_error(service: &ServiceName, port: &'static str, reason: impl Debug) -> PortError {
+    PortError::Port {
+        service: service.as_str().to_owned(),
+        port,
+        reason: format!("{reason:?}"),
+    }
+}
+
+fn open_wakeup_service(
+    node: &Node<Service>,
+    name: &ServiceName,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Service>, PortError> {
+    node.service_builder(name)
+        .event()
+        .max_nodes(ServiceLimits::MAX_NODES)
+        .open_or_create()
+        .map_err(|error| service_error(name, "event", error))
+}
+
+fn check_buffer_size(qos: &Qos) -> Result<(), PortError> {
+    if qos.buffer_size == 0 || qos.buffer_size > ServiceLimits::SUBSCRIBER_MAX_BUFFER {
+        return Err(PortError::BufferSize {
+            value: qos.buffer_size,
+            max: ServiceLimits::SUBSCRIBER_MAX_BUFFER,
+        });
+    }
+    Ok(())
+}
+
+fn overflow_strategy(qos: &Qos) -> BackpressureStrategy {
+    match qos.overflow {
+        Overflow::Block => BackpressureStrategy::RetryUntilDelivered,
+        Overflow::DropAndCount => BackpressureStrategy::DiscardData,
+    }
+}
+
+fn block_with_timeout(timeout: Duration) -> impl Fn(&BackpressureInfo) -> BackpressureAction {
+    move |info: &BackpressureInfo| {
+        if info.elapsed_time >= timeout {
+            BackpressureAction::DiscardData
+        } else {
+            BackpressureAction::Retry
+        }
+    }
+}
+
+/// Publishes slices (`[T]` with a user header `H`) on one stream and wakes its readers.
+pub struct SlicePublisher<T, H>
+where
+    T: Debug + ZeroCopySend + bytemuck::Pod + 'static,
+    H: Debug + ZeroCopySend + Copy + Default + 'static,
+{
+    service_name: ServiceName,
+    service: PortFactory<Service, [T], H>,
+    publisher: Publisher<Service, [T], H>,
+    notifier: Notifier<Service>,
+}
+
+/// Opens (or creates) the publish-subscribe service of `stream` with the crate-wide limits.
+fn open_slice_service<T, H>(
+    node: &Node<Service>,
+    name: &ServiceName,
+    stream: Stream,
+) -> Result<PortFactory<Service, [T], H>, PortError>
+where
+    T: Debug + ZeroCopySend + 'static,
+    H: Debug + ZeroCopySend + 'static,
+{
+    let latest = wants_latest(stream);
+    node.service_builder(name)
+        .publish_subscribe::<[T]>()
+        .user_header::<H>()
+        .enable_safe_overflow(latest)
+        .history_size(if latest {
+            ServiceLimits::LATEST_HISTORY
+        } else {
+            0
+        })
+        .subscriber_max_buffer_size(ServiceLimits::SUBSCRIBER_MAX_BUFFER)
+        .subscriber_max_borrowed_samples(ServiceLimits::SUBSCRIBER_MAX_BORROWED)
+        .max_publishers(ServiceLimits::MAX_PUBLISHERS)
+        .max_subscribers(ServiceLimits::MAX_SUBSCRIBERS)
+        .max_nodes(ServiceLimits::MAX_NODES)
+        .open_or_create()
+        .map_err(|error| service_error(name, "publish-subscribe", error))
+}
+
+impl<T, H> SlicePublisher<T, H>
+where
+    T: Debug + ZeroCopySend + bytemuck::Pod + 'static,
+    H: Debug + ZeroCopySend + Copy + Default + 'static,
+{
+    /// Opens the publisher of `stream` in pipeline `names`.
+    pub fn open(
+        node: &Node<Service>,
+        names: &PipelineNames,
+        stream: Stream,
+        qos: &Qos,
+    ) -> Result<Self, PortError> {
+        let service_name = names.service(stream)?;
+        let service = open_slice_service::<T, H>(node, &service_name, stream)?;
+        let builder = service
+            .publisher_builder()
+            .initial_max_slice_len(qos.initial_max_slice_len.max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .backpressure_strategy(overflow_strategy(qos));
+        let builder = match qos.overflow {
+            Overflow::Block => builder.set_backpressure_handler(block_with_timeout(
+                Duration::from_millis(qos.block_timeout_ms),
+            )),
+            Overflow::DropAndCount => builder,
+        };
+        let publisher = builder
+            .create()
+            .map_err(|error| port_error(&service_name, "publisher", error))?;
+        let notifier = open_wakeup_service(node, &service_name)?
+            .notifier_builder()
+            .create()
+            .map_err(|error| port_error(&service_name, "notifier", error))?;
+        Ok(Self {
+            service_name,
+            service,
+            publisher,
+            notifier,
+        })
+    }
+
+    /// The service name, for messages.
+    pub fn service_name(&self) -> &str {
+        self.service_name.as_str()
+    }
+
+    /// Connects new subscribers and hands them the history (the latest forecast); sending does
+    /// this too, so only an idle publisher needs to call it.
+    pub fn update_connections(&self) -> Result<(), PortError> {
+        self.publisher
+            .update_connections()
+            .map_err(|error| port_error(&self.service_name, "publisher connections", error))
+    }
+
+    /// Subscribers currently connected.
+    pub fn subscriber_count(&self) -> usize {
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Publishes a copy of `items`.
+    pub fn publish(&self, header: H, items: &[T]) -> Result<Delivery, PortError> {
+        self.publish_iter(header, items.iter().copied())
+    }
+
+    /// Writes the items of `items` straight into shared memory and publishes them.
+    pub fn publish_iter<I>(&self, header: H, items: I) -> Result<Delivery, PortError>
+    where
+        I: ExactSizeIterator<Item = T>,
+    {
+        let len = items.len();
+        let mut items = items;
+        let mut sample = self
+            .publisher
+            .loan_slice_uninit(len)
+            .map_err(|error| self.loan_error(len, error))?;
+        *sample.user_header_mut() = header;
+        // An iterator that under-reports its length leaves zeroed elements instead of
+        // uninitialised memory.
+        let sample = sample.write_from_fn(|_| items.next().unwrap_or_else(T::zeroed));
+        self.send(sample)
+    }
+
+    /// Publishes `len` elements that `fill` writes into zero-initialised shared memory.
+    pub fn publish_with(
+        &self,
+        header: H,
+        len: usize,
+        fill: impl FnOnce(&mut [T]),
+    ) -> Result<Delivery, PortError> {
+        let mut sample = self
+            .publisher
+            .loan_slice_uninit(len)
+            .map_err(|error| self.loan_error(len, error))?;
+        *sample.user_header_mut() = header;
+        let mut sample = sample.write_from_fn(|_| T::zeroed());
+        fill(sample.payload_mut());
+        self.send(sample)
+    }
+
+    fn loan_error(&self, len: usize, error: impl Debug) -> PortError {
+        PortError::Loan {
+            service: self.service_name.as_str().to_owned(),
+            len,
+            reason: format!("{error:?}"),
+        }
+    }
+
+    fn send(
+        &self,
+        sample: iceoryx2::sample_mut::SampleMut<Service, [T], H>,
+    ) -> Result<Delivery, PortError> {
+        let subscribers = self.subscriber_count();
+        let recipients = sample.send().map_err(|error| PortError::Send {
+            service: self.service_name.as_str().to_owned(),
+            reason: format!("{error:?}"),
+        })?;
+        self.notifier.notify().map_err(|error| PortError::Notify {
+            service: self.service_name.as_str().to_owned(),
+            reason: format!("{error:?}"),
+        })?;
+        Ok(Delivery {
+            recipients,
+            undelivered: subscribers.saturating_sub(recipients),
+        })
+    }
+}
+
+/// Receives slices of one stream; attach [`SliceSubscriber::listener`] to a `WaitSet` to sleep
+/// until a publisher sends.
+pub struct SliceSubscriber<T, H>
+where
+    T: Debug + ZeroCopySend + 'static,
+    H: Debug + ZeroCopySend + 'static,
+{
+    service_name: ServiceName,
+    subscriber: Subscriber<Service, [T], H>,
+    listener: Listener<Service>,
+}
+
+impl<T, H> SliceSubscriber<T, H>
+where
+    T: Debug + ZeroCopySend + 'static,
+    H: Debug + ZeroCopySend + 'static,
+{
+    /// Opens the subscriber of `stream` in pipeline `names`; `qos.buffer_size` samples can wait.
+    pub fn open(
+        node: &Node<Service>,
+        names: &PipelineNames,
+        stream: Stream,
+        qos: &Qos,
+    ) -> Result<Self, PortError> {
+        check_buffer_size(qos)?;
+        let service_name = names.service(stream)?;
+        let service = open_slice_service::<T, H>(node, &service_name, stream)?;
+        let builder = service.subscriber_builder().buffer_size(qos.buffer_size);
+        let builder = if wants_latest(stream) {
+            builder.history_request(ServiceLimits::LATEST_HISTORY)
+        } else {
+            builder
+        };
+        let subscriber = builder
+            .create()
+            .map_err(|error| port_error(&service_name, "subscriber", error))?;
+        let listener = open_wakeup_service(node, &service_name)?
+            .listener_builder()
+            .create()
+            .map_err(|error| port_error(&service_name, "listener", error))?;
+        Ok(Self {
+            service_name,
+            subscriber,
+            listener,
+        })
+    }
+
+    /// The service name, for messages.
+    pub fn service_name(&self) -> &str {
+        self.service_name.as_str()
+    }
+
+    /// The next waiting sample, if any.
+    pub fn receive(&self) -> Result<Option<Sample<Service, [T], H>>, PortError> {
+        self.subscriber
+            .receive()
+            .map_err(|error| PortError::Receive {
+                service: self.service_name.as_str().to_owned(),
+                reason: format!("{error:?}"),
+            })
+    }
+
+    /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`.
+    pub fn listener(&self) -> &Listener<Service> {
+        &self.listener
+    }
+
+    /// Clears pending wake-ups; call before draining the samples so no wake-up is lost.
+    pub fn clear_wakeups(&self) {
+        // A failing listener only means a spurious or missed wake-up; samples are drained anyway.
+        let _ = self.listener.try_wait(|_| {});
+    }
+}
+
+/// Opens the publish-subscribe service of a fixed-size value stream (stats).
+fn open_value_service<T>(
+    node: &Node<Service>,
+    name: &ServiceName,
+) -> Result<PortFactory<Service, T, ()>, PortError>
+where
+    T: Debug + ZeroCopySend + 'static,
+{
+    node.service_builder(name)
+        .publish_subscribe::<T>()
+        .enable_safe_overflow(true)
+        .history_size(ServiceLimits::LATEST_HISTORY)
+        .subscriber_max_buffer_size(ServiceLimits::SUBSCRIBER_MAX_BUFFER)
+        .subscriber_max_borrowed_samples(ServiceLimits::SUBSCRIBER_MAX_BORROWED)
+        .max_publishers(ServiceLimits::MAX_PUBLISHERS)
+        .max_subscribers(ServiceLimits::MAX_SUBSCRIBERS)
+        .max_nodes(ServiceLimits::MAX_NODES)
+        .open_or_create()
+        .map_err(|error| service_error(name, "publish-subscribe", error))
+}
+
+/// Publishes a fixed-size value whose newest copy is all readers need (the stats).
+pub struct LatestPublisher<T: Debug + ZeroCopySend + Copy + 'static> {
+    service_name: ServiceName,
+    publisher: Publisher<Service, T, ()>,
+    notifier: Notifier<Service>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> LatestPublisher<T> {
+    pub fn open(
+        node: &Node<Service>,
+        names: &PipelineNames,
+        stream: Stream,
+    ) -> Result<Self, PortError> {
+        let service_name = names.service(stream)?;
+        let publisher = open_value_service::<T>(node, &service_name)?
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(|error| port_error(&service_name, "publisher", error))?;
+        let notifier = open_wakeup_service(node, &service_name)?
+            .notifier_builder()
+            .create()
+            .map_err(|error| port_error(&service_name, "notifier", error))?;
+        Ok(Self {
+            service_name,
+            publisher,
+            notifier,
+        })
+    }
+
+    pub fn publish(&self, value: T) -> Result<(), PortError> {
+        self.publisher
+            .send_copy(value)
+            .map_err(|error| PortError::Send {
+                service: self.service_name.as_str().to_owned(),
+                reason: format!("{error:?}"),
+            })?;
+        self.notifier.notify().map_err(|error| PortError::Notify {
+            service: self.service_name.as_str().to_owned(),
+            reason: format!("{error:?}"),
+        })?;
+        Ok(())
+    }
+}
+
+/// Reads the newest value of a [`LatestPublisher`] stream.
+pub struct LatestSubscriber<T: Debug + ZeroCopySend + Copy + 'static> {
+    service_name: ServiceName,
+    subscriber: Subscriber<Service, T, ()>,
+    listener: Listener<Service>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
+    pub fn open(
+        node: &Node<Service>,
+        names: &PipelineNames,
+        stream: Stream,
+    ) -> Result<Self, PortError> {
+        let service_name = names.service(stream)?;
+        let subscriber = open_value_service::<T>(node, &service_name)?
+            .subscriber_builder()
+            .history_request(ServiceLimits::LATEST_HISTORY)
+            .create()
+            .map_err(|error| port_error(&service_name, "subscriber", error))?;
+        let listener = open_wakeup_service(node, &service_name)?
+            .listener_builder()
+            .create()
+            .map_err(|error| port_error(&service_name, "listener", error))?;
+        Ok(Self {
+            service_name,
+            subscriber,
+            listener,
+        })
+    }
+
+    /// The newest value received since the last call, draining older ones.
+    pub fn latest(&self) -> Result<Option<T>, PortError> {
+        let _ = self.listener.try_wait(|_| {});
+        let mut latest = None;
+        while let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(|error| PortError::Receive {
+                service: self.service_name.as_str().to_owned(),
+                reason: format!("{error:?}"),
+            })?
+        {
+            latest = Some(*sample.payload());
+        }
+        Ok(latest)
+    }
+
+    /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`.
+    pub fn listener(&self) -> &Listener<Service> {
+        &self.listener
+    }
+}
