@@ -1,14 +1,16 @@
 """The 2-bin voxel grid, identical to evgate-core's (crates/evgate-core/src/voxel.rs).
 
-For a window [t_end - 50 ms, t_end) (half-open, like evgate-core's time windows) each event at
-(x, y, t) with polarity p adds s = +1 (ON) or -1 (OFF) to two cells of its pixel, weighted
-linearly in normalised time tau = (t - t_start) / 50 ms in [0, 1):
+For a window [t_end - 50 ms, t_end] (both ends included, as evgate-core's `accumulate`, so
+the event at the reference time counts) each event at (x, y, t) with polarity p adds
+s = +1 (ON) or -1 (OFF) to two cells of its pixel, weighted linearly in normalised time
+tau = (t - t_start) / 50 ms in [0, 1]:
 
     V[0, y, x] += s * (1 - tau)        V[1, y, x] += s * tau
 
-Then the non-zero cells are standardised over the whole padded grid: with mean m and
-population standard deviation d of the non-zero cells, each non-zero cell becomes
-(v - m) / d (or v - m when d = 0); zero cells stay zero. The grid is the sensor padded with
+Then the non-zero cells are standardised over the whole padded grid: with mean m and sample
+standard deviation d (n - 1 denominator, E-RAFT's `torch.std`; 0 for fewer than two cells) of
+the non-zero cells, each non-zero cell becomes (v - m) / d (or v - m when d = 0); zero cells
+stay zero. The grid is the sensor padded with
 zeros at the right and bottom to multiples of 16.
 """
 
@@ -31,9 +33,9 @@ def accumulate(
     t: np.ndarray, x: np.ndarray, y: np.ndarray, on: np.ndarray, t_end: int, width: int, height: int
 ) -> np.ndarray:
     """Raw (unnormalised) voxel grid [2, padded(height), padded(width)], float32, of the events
-    of [t_end - 50 ms, t_end); events outside that window are ignored."""
+    of [t_end - 50 ms, t_end]; events outside that window are ignored."""
     t_start = t_end - WINDOW_US
-    inside = (t >= t_start) & (t < t_end)
+    inside = (t >= t_start) & (t <= t_end)
     t, x, y, on = t[inside], x[inside].astype(np.int64), y[inside].astype(np.int64), on[inside]
     if x.size and (x.max() >= width or y.max() >= height):
         bad = int(np.flatnonzero((x >= width) | (y >= height))[0])
@@ -51,12 +53,13 @@ def accumulate(
 
 
 def normalise(grid: np.ndarray) -> np.ndarray:
-    """Standardises the non-zero cells (mean / population std), in place and returned."""
+    """Standardises the non-zero cells (mean / sample std), in place and returned."""
     nonzero = grid != 0
     if not nonzero.any():
         return grid
     values = grid[nonzero].astype(np.float64)
-    mean, std = values.mean(), values.std()
+    mean = values.mean()
+    std = values.std(ddof=1) if values.size > 1 else 0.0
     grid[nonzero] = ((values - mean) / std if std > 0 else values - mean).astype(np.float32)
     return grid
 

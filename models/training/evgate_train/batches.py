@@ -1,0 +1,87 @@
+"""Random training chunks: B sequences x L consecutive windows, one crop and one augmentation
+per chunk, collated into tensors window by window."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .augment import Augmentation, apply
+from .sequence import Sequence
+from .windows import Crop, FutureEvents, training_window
+
+
+class ChunkSamplingError(ValueError):
+    """A chunk/crop request that no sequence can satisfy."""
+
+
+@dataclass
+class WindowBatch:
+    voxel: torch.Tensor  # [B, 2, S, S]
+    mask: torch.Tensor  # [B, 1, S, S]
+    mask_valid: torch.Tensor  # [B] bool
+    horizons_ms: torch.Tensor  # [B, K]
+    future_mask: torch.Tensor  # [B, K, S, S]
+    future_flow: torch.Tensor  # [B, K, 2, S, S]
+    flow_valid: torch.Tensor  # [B, K, S, S]
+    future_events: list[list[FutureEvents]]  # [B][K]
+
+
+def collate(windows: list) -> WindowBatch:
+    def stack(name: str) -> torch.Tensor:
+        return torch.from_numpy(np.stack([getattr(w, name) for w in windows]))
+
+    return WindowBatch(
+        voxel=stack("voxel"),
+        mask=stack("mask").unsqueeze(1),
+        mask_valid=torch.tensor([w.mask_valid for w in windows]),
+        horizons_ms=stack("horizons_ms"),
+        future_mask=stack("future_mask"),
+        future_flow=stack("future_flow"),
+        flow_valid=stack("flow_valid"),
+        future_events=[w.future_events for w in windows],
+    )
+
+
+class ChunkSampler:
+    def __init__(
+        self,
+        sequences: list[Sequence],
+        chunk_windows: int,
+        crop_size: int,
+        max_events: int,
+        augment: bool,
+        seed: int,
+    ):
+        self.sequences = [
+            s for s in sequences if len(s.ref_ts) >= chunk_windows and min(s.width, s.height) >= crop_size
+        ]
+        if not self.sequences:
+            raise ChunkSamplingError(
+                f"no sequence has {chunk_windows} reference windows and a {crop_size}x{crop_size} crop "
+                f"(of {len(sequences)} sequences)"
+            )
+        self.chunk_windows = chunk_windows
+        self.crop_size = crop_size
+        self.max_events = max_events
+        self.augment = augment
+        self.rng = np.random.default_rng(seed)
+
+    def _chunk(self) -> list:
+        sequence = self.sequences[int(self.rng.integers(len(self.sequences)))]
+        start = int(self.rng.integers(len(sequence.ref_ts) - self.chunk_windows + 1))
+        crop = Crop(
+            left=int(self.rng.integers(sequence.width - self.crop_size + 1)),
+            top=int(self.rng.integers(sequence.height - self.crop_size + 1)),
+            size=self.crop_size,
+        )
+        augmentation = Augmentation.draw(self.rng) if self.augment else Augmentation(False, False, False)
+        return [
+            apply(training_window(sequence, start + i, crop, self.max_events, self.rng), augmentation, self.crop_size)
+            for i in range(self.chunk_windows)
+        ]
+
+    def sample(self, batch: int) -> list[WindowBatch]:
+        """L window batches, in time order."""
+        chunks = [self._chunk() for _ in range(batch)]
+        return [collate([chunk[i] for chunk in chunks]) for i in range(self.chunk_windows)]

@@ -1,0 +1,185 @@
+"""Trains the suppression network on simulated sequences (docs/sequence-format.md).
+
+    python -m evgate_train.train --data ../../data/suite/train --manifest ../../data/suite/manifest.json \
+        --run-dir runs/S --size S --steps 1500
+
+Chunks of consecutive 50 ms windows carry the recurrent state; horizons come from the
+sequences' uniformly sampled ones in [0, 100] ms. Writes runs/<name>/checkpoint.pt (resumable
+with --resume), log.jsonl (one line of losses per step) and config.json.
+"""
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import random
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from .batches import ChunkSampler
+from .checkpoint import load_checkpoint, save_checkpoint
+from .network import NetworkConfig, SuppressionNetwork, check_input_size
+from .objective import LossWeights, window_objective
+from .sequence import load_sequence
+
+log = logging.getLogger("evgate_train.train")
+
+
+class TrainingSetupError(ValueError):
+    """A training run that cannot start: missing data, manifest or inconsistent resume."""
+
+
+def manifest_digest(path: Path) -> str:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as error:
+        raise TrainingSetupError(f"{path}: cannot read the training manifest: {error}") from error
+
+
+def learning_rate(step: int, total: int, peak: float, warmup: int) -> float:
+    """Linear warm-up, then cosine decay to a tenth of the peak."""
+    if step < warmup:
+        return peak * (step + 1) / warmup
+    progress = min(1.0, (step - warmup) / max(1, total - warmup))
+    return peak * (0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * progress)))
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--data", type=Path, required=True, help="directory of training .npz sequences")
+    parser.add_argument("--manifest", type=Path, required=True, help="the suite's manifest, hashed into the model")
+    parser.add_argument("--run-dir", type=Path, required=True, help="checkpoint, logs and config go here")
+    parser.add_argument("--size", default="S", help="model size: XS, S, M or L")
+    parser.add_argument(
+        "--time-conditioning", default="position-aware", help="ATC variant: position-aware, reference or none"
+    )
+    parser.add_argument("--steps", type=int, default=1500, help="optimiser steps")
+    parser.add_argument("--batch", type=int, default=4, help="chunks per step")
+    parser.add_argument("--chunk-windows", type=int, default=4, help="consecutive 50 ms windows per chunk")
+    parser.add_argument("--crop", type=int, default=112, help="square crop side in pixels (multiple of 16)")
+    parser.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (AdamW)")
+    parser.add_argument("--warmup", type=int, default=50, help="warm-up steps")
+    parser.add_argument("--weight-decay", type=float, default=1e-4, help="AdamW weight decay")
+    parser.add_argument("--dice-weight", type=float, default=0.5, help="Dice term weight (0 disables Dice)")
+    parser.add_argument("--flow-weight", type=float, default=0.1, help="flow L1 weight")
+    parser.add_argument("--smoothness-weight", type=float, default=0.05, help="Charbonnier smoothness weight")
+    parser.add_argument("--contrast-weight", type=float, default=1.0, help="contrast-maximisation weight")
+    parser.add_argument("--max-contrast-events", type=int, default=4000, help="events per future window for CM")
+    parser.add_argument("--no-augment", action="store_true", help="disable flips and polarity inversion")
+    parser.add_argument("--seed", type=int, default=7, help="seed of weights, sampling and augmentation")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch CPU threads; on a shared 2-core machine 1 is several times faster than 2 "
+        "(OpenMP workers spin on busy cores)",
+    )
+    parser.add_argument("--checkpoint-every", type=int, default=50, help="steps between checkpoints")
+    parser.add_argument("--resume", action="store_true", help="continue from run-dir/checkpoint.pt")
+    return parser
+
+
+def train(args: argparse.Namespace) -> Path:
+    torch.set_num_threads(args.threads)
+    check_input_size(args.crop, args.crop)
+    paths = sorted(args.data.glob("*.npz"))
+    if not paths:
+        raise TrainingSetupError(f"{args.data}: no .npz sequences found")
+    digest = manifest_digest(args.manifest)
+    checkpoint_path = args.run_dir / "checkpoint.pt"
+    train_config = {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()}
+    start_step, optimiser_state = 0, None
+    if args.resume and checkpoint_path.exists():
+        checkpoint = load_checkpoint(checkpoint_path)
+        if checkpoint.manifest_sha256 != digest:
+            raise TrainingSetupError(
+                f"{checkpoint_path}: trained on manifest {checkpoint.manifest_sha256[:12]}, "
+                f"but --manifest hashes to {digest[:12]}"
+            )
+        network, start_step, optimiser_state = checkpoint.network, checkpoint.step, checkpoint.optimiser_state
+        log.info("resuming %s at step %d", checkpoint_path, start_step)
+    else:
+        seed_everything(args.seed)
+        network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
+    log.info("loading %d sequences from %s", len(paths), args.data)
+    sequences = [load_sequence(p) for p in tqdm(paths, desc="loading", unit="seq")]
+    # Resumed runs reseed by step so the data stream continues instead of repeating.
+    seed_everything(args.seed + start_step)
+    sampler = ChunkSampler(
+        sequences, args.chunk_windows, args.crop, args.max_contrast_events, not args.no_augment, args.seed + start_step
+    )
+    weights = LossWeights(
+        dice=args.dice_weight,
+        flow=args.flow_weight,
+        smoothness=args.smoothness_weight,
+        contrast=args.contrast_weight,
+    )
+    optimiser = torch.optim.AdamW(network.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    if optimiser_state is not None:
+        optimiser.load_state_dict(optimiser_state)
+    args.run_dir.mkdir(parents=True, exist_ok=True)
+    (args.run_dir / "config.json").write_text(
+        json.dumps(
+            {"train": train_config, "network": dataclasses.asdict(network.config), "loss": dataclasses.asdict(weights),
+             "manifest_sha256": digest, "sequences": [p.name for p in paths]},
+            indent=2,
+        )
+    )
+    network.train()
+    started = time.monotonic()
+    with open(args.run_dir / "log.jsonl", "a") as log_file, tqdm(
+        total=args.steps, initial=start_step, desc=f"train {network.config.size}", unit="step"
+    ) as progress:
+        for step in range(start_step, args.steps):
+            rate = learning_rate(step, args.steps, args.lr, args.warmup)
+            for group in optimiser.param_groups:
+                group["lr"] = rate
+            batches = sampler.sample(args.batch)
+            crop = args.crop
+            states = network.initial_states(args.batch, crop, crop)
+            sums: dict[str, torch.Tensor] = {}
+            for batch in batches:
+                out = network(batch.voxel, batch.horizons_ms, states)
+                states = out.states
+                for key, value in window_objective(out, batch, weights).items():
+                    sums[key] = sums.get(key, 0.0) + value / len(batches)
+            optimiser.zero_grad(set_to_none=True)
+            sums["total"].backward()
+            gradient_norm = torch.nn.utils.clip_grad_norm_(network.parameters(), 1.0)
+            optimiser.step()
+            record = {k: round(float(v.detach()), 5) for k, v in sums.items()}
+            record.update(
+                step=step + 1, lr=rate, grad_norm=round(float(gradient_norm), 4),
+                elapsed_s=round(time.monotonic() - started, 1),
+            )
+            log_file.write(json.dumps(record) + "\n")
+            log_file.flush()
+            progress.update(1)
+            progress.set_postfix(loss=record["total"], mask=record["mask"], future=record["future_mask"])
+            if (step + 1) % args.checkpoint_every == 0 or step + 1 == args.steps:
+                save_checkpoint(checkpoint_path, network, optimiser, step + 1, digest, train_config)
+    log.info("finished %d steps in %.0f s; checkpoint %s", args.steps, time.monotonic() - started, checkpoint_path)
+    return checkpoint_path
+
+
+def main(argv: list[str] | None = None) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    train(build_parser().parse_args(argv))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
