@@ -54,11 +54,9 @@ class TimeConditioning(nn.Module):
         self.feed_forward_norm = nn.LayerNorm(channels)
         self.feed_forward = nn.Sequential(nn.Linear(channels, 2 * channels), nn.ReLU(), nn.Linear(2 * channels, channels))
 
-    def forward(self, features: torch.Tensor, horizons_ms: torch.Tensor) -> torch.Tensor:
-        """Conditions features [N, C, h, w] on horizons [N] (ms); returns [N, C, h, w]."""
-        if self.variant == "none":
-            return features
-        batch, _, height, width = features.shape
+    def attention_update(self, features: torch.Tensor, horizons_ms: torch.Tensor) -> torch.Tensor:
+        """The cross-attention output [N, h*w, C] that is added to the tokens of features [N, C, h, w]."""
+        batch = features.shape[0]
         channels = self.channels
         tokens = features.flatten(2).transpose(1, 2)
         normalised = self.token_norm(tokens)
@@ -77,6 +75,13 @@ class TimeConditioning(nn.Module):
         value = split_heads(self.value(normalised))
         weights = torch.softmax(query @ key.transpose(-1, -2) / math.sqrt(head_channels), dim=-1)
         attended = (weights @ value).transpose(1, 2).reshape(batch, -1, channels)
-        tokens = tokens + self.output(attended)
+        return self.output(attended)
+
+    def forward(self, features: torch.Tensor, horizons_ms: torch.Tensor) -> torch.Tensor:
+        """Conditions features [N, C, h, w] on horizons [N] (ms); returns [N, C, h, w]."""
+        if self.variant == "none":
+            return features
+        batch, channels, height, width = features.shape
+        tokens = features.flatten(2).transpose(1, 2) + self.attention_update(features, horizons_ms)
         tokens = tokens + self.feed_forward(self.feed_forward_norm(tokens))
-        return tokens.transpose(1, 2).reshape(batch, channels, height, width)
+        return tokens.transpose(1, 2).reshape(batch, self.channels, height, width)

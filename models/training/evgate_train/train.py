@@ -59,7 +59,7 @@ def seed_everything(seed: int) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", type=Path, required=True, help="directory of training .npz sequences")
+    parser.add_argument("--data", type=Path, required=True, help="directory searched recursively for training .npz sequences")
     parser.add_argument("--manifest", type=Path, required=True, help="the suite's manifest, hashed into the model")
     parser.add_argument("--run-dir", type=Path, required=True, help="checkpoint, logs and config go here")
     parser.add_argument("--size", default="S", help="model size: XS, S, M or L")
@@ -95,7 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
 def train(args: argparse.Namespace) -> Path:
     torch.set_num_threads(args.threads)
     check_input_size(args.crop, args.crop)
-    paths = sorted(args.data.glob("*.npz"))
+    paths = sorted(args.data.rglob("*.npz"))
     if not paths:
         raise TrainingSetupError(f"{args.data}: no .npz sequences found")
     digest = manifest_digest(args.manifest)

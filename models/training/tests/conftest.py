@@ -2,11 +2,15 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from synthetic_sequence import write_sequence  # noqa: E402
+
+# Two shared cores: one thread avoids OpenMP workers spinning against each other.
+torch.set_num_threads(1)
 
 
 @pytest.fixture(scope="session")

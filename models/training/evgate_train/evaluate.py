@@ -1,0 +1,164 @@
+"""Evaluates trained checkpoints on held-out sequences, with the paper's Table VI ablation.
+
+    python -m evgate_train.evaluate --data ../../data/suite/test \
+        --model full=runs/S/checkpoint.pt --model no-atc=runs/S-none/checkpoint.pt \
+        --output runs/eval-test.json
+
+Every sequence is streamed from its start with the recurrent state carried, as the runtime
+does. At each 50 ms reference time t with ground truth, the current mask is scored against
+the mask at t (mIoU, pIoU, SR@0.5, R@0.5) and each forecast against the mask at t + h. The
+first model also yields the two forecast-free baselines: its current mask held still ("no
+forecast") and moved by linear extrapolation of its masks ("linear").
+"""
+
+import argparse
+import json
+import logging
+import math
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from .checkpoint import load_checkpoint
+from .linear_extrapolation import extrapolate
+from .metrics import SequenceScores, frame_scores
+from .network import SuppressionNetwork
+from .sequence import Sequence, load_sequence
+from .voxel import WINDOW_US, padded, voxel_grid
+
+EVIMO_LIKE = ("boxes", "floor", "wall", "table", "fast")
+log = logging.getLogger("evgate_train.evaluate")
+
+
+class EvaluationSetupError(ValueError):
+    """A bad --model specification or an empty data directory."""
+
+
+def parse_model(spec: str) -> tuple[str, Path]:
+    name, separator, path = spec.partition("=")
+    if not separator or not name or not path:
+        raise EvaluationSetupError(f"--model {spec!r}: expected NAME=CHECKPOINT, e.g. full=runs/S/checkpoint.pt")
+    return name, Path(path)
+
+
+@torch.no_grad()
+def evaluate_sequence(
+    network: SuppressionNetwork, sequence: Sequence, horizons_ms: list[float], with_baselines: bool
+) -> dict[str, SequenceScores]:
+    """Scores keyed "current", "future-<h>ms" (and "no-forecast-<h>ms", "linear-<h>ms")."""
+    network.eval()
+    height, width = padded(sequence.height), padded(sequence.width)
+    states = network.initial_states(1, height, width)
+    horizons = torch.tensor([horizons_ms], dtype=torch.float32)
+    scores: dict[str, SequenceScores] = defaultdict(SequenceScores)
+    previous = None
+    for reference in sequence.ref_ts:
+        t_end = int(reference)
+        window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
+        ts, xs, ys, on = (a[window] for a in (sequence.events_t, sequence.events_x, sequence.events_y, sequence.events_on))
+        voxel = voxel_grid(ts, xs, ys, on, t_end, sequence.width, sequence.height)
+        out = network(torch.from_numpy(voxel)[None], horizons, states)
+        states = out.states
+        current = (out.mask_logits[0, 0, : sequence.height, : sequence.width] > 0).numpy()
+        now = sequence.grid_index(t_end)
+        if now is not None:
+            event_pixels = np.zeros((sequence.height, sequence.width), dtype=bool)
+            event_pixels[ys, xs] = True
+            scores["current"].add(frame_scores(current, sequence.masks[now], event_pixels))
+        for k, horizon in enumerate(horizons_ms):
+            future = sequence.grid_index(t_end + int(round(horizon * 1000)))
+            if future is None:
+                continue
+            truth = sequence.masks[future]
+            forecast = (out.future_mask_logits[0, k, : sequence.height, : sequence.width] > 0).numpy()
+            scores[f"future-{horizon:g}ms"].add(frame_scores(forecast, truth, None))
+            if with_baselines:
+                scores[f"no-forecast-{horizon:g}ms"].add(frame_scores(current, truth, None))
+                moved = extrapolate(previous, current, WINDOW_US / 1000, horizon) if previous is not None else current
+                scores[f"linear-{horizon:g}ms"].add(frame_scores(moved, truth, None))
+        previous = current
+    return scores
+
+
+def aggregate(per_sequence: list[tuple[str, dict[str, dict]]]) -> dict:
+    """Means per preset (over its sequences) and over the EVIMO-like presets."""
+    by_preset: dict[str, dict[str, list[dict]]] = defaultdict(lambda: defaultdict(list))
+    for preset, summaries in per_sequence:
+        for key, summary in summaries.items():
+            by_preset[preset][key].append(summary)
+
+    def mean_of(summaries: list[dict]) -> dict:
+        metrics = [m for m in summaries[0] if m != "frames"]
+        result = {"sequences": len(summaries), "frames": sum(s["frames"] for s in summaries)}
+        for metric in metrics:
+            values = [s[metric] for s in summaries if not math.isnan(s[metric])]
+            result[metric] = float(np.mean(values)) if values else float("nan")
+        return result
+
+    presets = {preset: {key: mean_of(v) for key, v in keys.items()} for preset, keys in sorted(by_preset.items())}
+    evimo = [p for p in EVIMO_LIKE if p in presets]
+    keys = sorted({key for p in evimo for key in presets[p]})
+    evimo_mean = {}
+    for key in keys:
+        rows = [presets[p][key] for p in evimo if key in presets[p]]
+        evimo_mean[key] = {
+            metric: float(np.nanmean([r[metric] for r in rows])) if any(not math.isnan(r[metric]) for r in rows) else float("nan")
+            for metric in rows[0]
+            if metric not in ("sequences", "frames")
+        }
+    return {"presets": presets, "evimo-like-mean": evimo_mean, "evimo-like-presets": evimo}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--data", type=Path, required=True, help="directory searched recursively for .npz sequences")
+    parser.add_argument(
+        "--model", action="append", required=True, help="NAME=CHECKPOINT; repeatable; the first also gives the baselines"
+    )
+    parser.add_argument("--horizons-ms", default="100", help="comma-separated forecast horizons to score (ms)")
+    parser.add_argument("--presets", default="", help="comma-separated presets to keep (default: all)")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    parser.add_argument("--output", type=Path, required=True, help="JSON report path")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    torch.set_num_threads(args.threads)
+    models = [parse_model(spec) for spec in args.model]
+    horizons = [float(h) for h in args.horizons_ms.split(",")]
+    paths = sorted(args.data.rglob("*.npz"))
+    if not paths:
+        raise EvaluationSetupError(f"{args.data}: no .npz sequences found")
+    keep = {p for p in args.presets.split(",") if p}
+    report: dict = {"data": str(args.data), "horizons_ms": horizons, "models": {}, "sequences": [str(p) for p in paths]}
+    networks = [(name, load_checkpoint(path)) for name, path in models]
+    results: dict[str, list] = defaultdict(list)
+    for path in tqdm(paths, desc="evaluate", unit="seq"):
+        sequence = load_sequence(path)
+        if keep and sequence.preset not in keep:
+            continue
+        for index, (name, checkpoint) in enumerate(networks):
+            scores = evaluate_sequence(checkpoint.network, sequence, horizons, with_baselines=index == 0)
+            results[name].append((sequence.preset, {key: s.summary() for key, s in scores.items()}))
+    for name, checkpoint in networks:
+        report["models"][name] = {
+            "checkpoint": str(dict(models)[name]),
+            "steps": checkpoint.step,
+            "time-conditioning": checkpoint.network.config.time_conditioning,
+            "size": checkpoint.network.config.size,
+            **aggregate(results[name]),
+        }
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(report, indent=2))
+    for name, model in report["models"].items():
+        for key, metrics in model["evimo-like-mean"].items():
+            text = " ".join(f"{m}={100 * v:.1f}%" for m, v in metrics.items())
+            print(f"{name:>14} {key:>18} {text}")
+    log.info("wrote %s", args.output)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

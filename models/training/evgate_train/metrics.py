@@ -1,0 +1,94 @@
+"""Segmentation metrics of DESIGN.md section 4 (the same definitions as evgate-eval).
+
+Prediction = logit > 0. IMO and background IoU, mIoU = their NaN-aware mean, pIoU = IMO IoU
+over the pixels that hold at least one event, SR@0.5 = frames with IMO IoU >= 0.5 (a frame
+with no IMO in prediction and truth counts as a success), R@0.5 = ground-truth instances
+matched (Hungarian on IoU against 8-connected predicted components) with IoU > 0.5.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.optimize import linear_sum_assignment
+
+EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
+
+
+def _iou(predicted: np.ndarray, truth: np.ndarray) -> float:
+    union = np.count_nonzero(predicted | truth)
+    return np.count_nonzero(predicted & truth) / union if union else float("nan")
+
+
+@dataclass
+class FrameScores:
+    imo_iou: float
+    background_iou: float
+    miou: float
+    piou: float
+    success: bool
+    instances_found: int
+    instances_total: int
+
+
+def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.ndarray | None) -> FrameScores:
+    """predicted: bool [H, W]; truth_ids: object ids [H, W]; event_pixels: bool [H, W] or None."""
+    truth = truth_ids > 0
+    imo = _iou(predicted, truth)
+    background = _iou(~predicted, ~truth)
+    defined = [v for v in (imo, background) if not np.isnan(v)]
+    piou = _iou(predicted & event_pixels, truth & event_pixels) if event_pixels is not None else float("nan")
+    found, total = match_instances(predicted, truth_ids)
+    return FrameScores(
+        imo_iou=imo,
+        background_iou=background,
+        miou=float(np.mean(defined)) if defined else float("nan"),
+        piou=piou,
+        success=bool(np.isnan(imo) or imo >= 0.5),
+        instances_found=found,
+        instances_total=total,
+    )
+
+
+def match_instances(predicted: np.ndarray, truth_ids: np.ndarray, threshold: float = 0.5) -> tuple[int, int]:
+    """(ground-truth instances matched with IoU > threshold, ground-truth instances)."""
+    ids = [int(i) for i in np.unique(truth_ids) if i != 0]
+    if not ids:
+        return 0, 0
+    labels, count = ndimage.label(predicted, structure=EIGHT_CONNECTED)
+    if count == 0:
+        return 0, len(ids)
+    ious = np.zeros((len(ids), count))
+    component_areas = np.bincount(labels.ravel(), minlength=count + 1)[1:]
+    for row, instance in enumerate(ids):
+        inside = truth_ids == instance
+        shared = np.bincount(labels[inside], minlength=count + 1)[1:]
+        ious[row] = shared / (np.count_nonzero(inside) + component_areas - shared)
+    rows, cols = linear_sum_assignment(ious, maximize=True)
+    return int(np.count_nonzero(ious[rows, cols] > threshold)), len(ids)
+
+
+@dataclass
+class SequenceScores:
+    """Per-frame scores of one sequence, averaged per sequence (then over sequences)."""
+
+    frames: list[FrameScores] = field(default_factory=list)
+
+    def add(self, scores: FrameScores) -> None:
+        self.frames.append(scores)
+
+    def summary(self) -> dict[str, float]:
+        def mean(name: str) -> float:
+            values = np.array([getattr(f, name) for f in self.frames], dtype=float)
+            return float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
+
+        found = sum(f.instances_found for f in self.frames)
+        total = sum(f.instances_total for f in self.frames)
+        return {
+            "frames": len(self.frames),
+            "miou": mean("miou"),
+            "imo_iou": mean("imo_iou"),
+            "piou": mean("piou"),
+            "sr50": float(np.mean([f.success for f in self.frames])) if self.frames else float("nan"),
+            "r50": found / total if total else float("nan"),
+        }

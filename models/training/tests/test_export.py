@@ -1,0 +1,78 @@
+import numpy as np
+import onnx
+import onnxruntime
+import pytest
+import torch
+
+from evgate_train.export import INPUT_NAMES, OUTPUT_NAMES, export
+from evgate_train.network import NetworkConfig, SuppressionNetwork
+from evgate_train.sequence import load_sequence
+from evgate_train.voxel import voxel_grid
+
+HEIGHT, WIDTH = 48, 96
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    torch.manual_seed(1)
+    network = SuppressionNetwork(NetworkConfig(size="XS")).eval()
+    # Random, non-zero head weights: freshly initialised refinement heads are zero and would
+    # leave parts of the graph untested.
+    with torch.no_grad():
+        for parameter in network.parameters():
+            parameter.add_(0.05 * torch.randn_like(parameter))
+    path = tmp_path_factory.mktemp("onnx") / "tiny.onnx"
+    export(network, path, HEIGHT, WIDTH, manifest_sha256="ab" * 32, train_steps=12)
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = 1
+    session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    return network, session, path
+
+
+def _compare(network, session, voxel: np.ndarray, horizons: list[float], states=None):
+    torch_states = [torch.from_numpy(s) for s in states] if states else network.initial_states(1, HEIGHT, WIDTH)
+    with torch.no_grad():
+        out = network(torch.from_numpy(voxel)[None], torch.tensor([horizons]), torch_states)
+    feeds = {"voxel": voxel[None], "horizons_ms": np.array(horizons, np.float32)}
+    feeds.update({f"state_{i}": s.numpy() for i, s in enumerate(torch_states)})
+    onnx_out = session.run(OUTPUT_NAMES, feeds)
+    expected = [out.mask_logits, out.future_mask_logits, out.future_flow, *out.states]
+    for name, got, want in zip(OUTPUT_NAMES, onnx_out, expected):
+        np.testing.assert_allclose(got, want.numpy(), atol=1e-4, rtol=1e-4, err_msg=name)
+    return [s.numpy() for s in out.states]
+
+
+def test_contract_names_and_metadata(exported):
+    _, session, path = exported
+    assert [i.name for i in session.get_inputs()] == INPUT_NAMES
+    assert [o.name for o in session.get_outputs()] == OUTPUT_NAMES
+    metadata = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+    assert metadata["evgate.model-size"] == "XS"
+    assert metadata["evgate.state-channels"] == "8,16,32,64"
+    assert (metadata["evgate.input-height"], metadata["evgate.input-width"]) == ("48", "96")
+    assert metadata["evgate.atc"] == "position-aware"
+    assert metadata["evgate.train-steps"] == "12"
+    assert metadata["evgate.train-manifest-sha256"] == "ab" * 32
+    assert {"evgate.bins", "evgate.window-ms", "evgate.max-horizon-ms", "evgate.base-channels"} <= metadata.keys()
+
+
+@pytest.mark.parametrize("horizons", [[100.0], [25.0, 50.0, 75.0, 100.0]])
+def test_parity_on_random_inputs(exported, horizons):
+    network, session, _ = exported
+    rng = np.random.default_rng(5)
+    states = [rng.standard_normal(tuple(s.shape)).astype(np.float32) * 0.5 for s in network.initial_states(1, HEIGHT, WIDTH)]
+    _compare(network, session, rng.standard_normal((2, HEIGHT, WIDTH)).astype(np.float32), horizons, states)
+
+
+def test_parity_on_simulated_windows_with_carried_state(exported, synthetic_dir):
+    network, session, _ = exported
+    sequence = load_sequence(synthetic_dir / "slide-0.npz")
+    states = None
+    for reference in sequence.ref_ts[:3]:
+        t_end = int(reference)
+        window = sequence.event_range(t_end - 50_000, t_end + 1)
+        voxel = voxel_grid(
+            sequence.events_t[window], sequence.events_x[window], sequence.events_y[window],
+            sequence.events_on[window], t_end, sequence.width, sequence.height,
+        )
+        states = _compare(network, session, voxel, [20.0, 100.0], states)

@@ -1,0 +1,47 @@
+import numpy as np
+import pytest
+
+from evgate_train.linear_extrapolation import extrapolate
+from evgate_train.metrics import frame_scores, match_instances
+
+
+def test_iou_miou_and_piou():
+    truth = np.zeros((10, 10), np.uint8)
+    truth[2:6, 2:6] = 1  # 16 px
+    predicted = np.zeros((10, 10), bool)
+    predicted[2:6, 4:8] = True  # 16 px, 8 shared
+    events = np.zeros((10, 10), bool)
+    events[2:6, 2:5] = True  # 12 event pixels: truth 12, predicted 4, shared 4
+    scores = frame_scores(predicted, truth, events)
+    assert scores.imo_iou == pytest.approx(8 / 24)
+    assert scores.background_iou == pytest.approx(76 / 92)
+    assert scores.miou == pytest.approx((8 / 24 + 76 / 92) / 2)
+    assert scores.piou == pytest.approx(4 / 12)
+    assert not scores.success
+
+
+def test_recall_matches_instances_one_to_one():
+    truth = np.zeros((12, 12), np.uint8)
+    truth[1:4, 1:4] = 1
+    truth[7:11, 7:11] = 2
+    predicted = np.zeros((12, 12), bool)
+    predicted[1:4, 1:4] = True  # exact match of instance 1
+    predicted[7:8, 7:8] = True  # far too small for instance 2
+    assert match_instances(predicted, truth) == (1, 2)
+    assert match_instances(np.zeros((12, 12), bool), truth) == (0, 2)
+
+
+def test_empty_frame_is_a_success_with_undefined_imo_iou():
+    scores = frame_scores(np.zeros((4, 4), bool), np.zeros((4, 4), np.uint8), None)
+    assert np.isnan(scores.imo_iou) and scores.miou == 1.0 and scores.success
+
+
+def test_linear_extrapolation_continues_the_motion():
+    before = np.zeros((20, 40), bool)
+    before[5:9, 2:6] = True
+    now = np.zeros((20, 40), bool)
+    now[5:9, 7:11] = True  # 5 px in 50 ms
+    forecast = extrapolate(before, now, elapsed_ms=50.0, horizon_ms=100.0)
+    expected = np.zeros((20, 40), bool)
+    expected[5:9, 17:21] = True
+    np.testing.assert_array_equal(forecast, expected)
