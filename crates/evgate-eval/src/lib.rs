@@ -1,12 +1,31 @@
 //! Evaluation of motion-aware event suppression: metrics (IoU, mIoU, pIoU, SR@0.5, R@0.5,
 //! per-event precision / recall / F1), the baselines (OMS, no forecast, linear extrapolation,
-//! oracle), the harness that runs them and the model over labelled sequences, and the reports.
+//! oracle), the harness that runs them and the model over labelled sequences, and the reports
+//! (JSON, Markdown tables, PNG plots).
 
+pub mod binned;
 pub mod components;
+pub mod config;
 pub mod event_scores;
+#[cfg(test)]
+mod fixture;
+pub mod harness;
 pub mod hungarian;
 pub mod instances;
 pub mod linear;
+pub mod markdown;
+pub mod method;
 pub mod oms;
+pub mod output;
 pub mod plot;
+pub mod report;
 pub mod segmentation;
+pub mod sequence;
+pub mod summary;
+
+pub use config::{EvalConfig, OmsSweep};
+pub use harness::{Evaluation, HarnessError, LoadedModel};
+pub use method::{MethodInfo, MethodKind};
+pub use oms::OmsParameters;
+pub use output::{write_report, OutputError, WrittenReport};
+pub use report::Report;

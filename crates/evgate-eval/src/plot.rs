@@ -22,7 +22,9 @@ pub enum PlotError {
     },
     #[error("plot '{title}' has no finite point to draw")]
     NoData { title: String },
-    #[error("plot '{title}' uses a logarithmic x axis but series '{series}' has x = {x} (must be > 0)")]
+    #[error(
+        "plot '{title}' uses a logarithmic x axis but series '{series}' has x = {x} (must be > 0)"
+    )]
     NonPositiveLogX {
         title: String,
         series: String,
@@ -221,9 +223,11 @@ impl LinePlot {
             .collect();
         let (mut x_min, mut x_max) = match &self.x_axis {
             XAxis::Categories(names) => (-0.5, names.len() as f64 - 0.5),
-            _ => xs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
-                (lo.min(x), hi.max(x))
-            }),
+            _ => xs
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                    (lo.min(x), hi.max(x))
+                }),
         };
         if !x_min.is_finite() || xs.is_empty() {
             return Err(PlotError::NoData {
@@ -256,7 +260,13 @@ impl LinePlot {
             let (_, py) = to_pixel(x_min, y);
             canvas.line((left, py), (right, py), grid, 1);
             let label = format_tick(y);
-            canvas.text(left - 6 - Canvas::text_width(&label, 1), py - 4, &label, 1, black);
+            canvas.text(
+                left - 6 - Canvas::text_width(&label, 1),
+                py - 4,
+                &label,
+                1,
+                black,
+            );
             y += self.y_step;
         }
         let x_ticks: Vec<(f64, String)> = match &self.x_axis {
@@ -282,7 +292,13 @@ impl LinePlot {
             let (px, _) = to_pixel(*x, y_min);
             canvas.line((px, top), (px, bottom), grid, 1);
             canvas.line((px, bottom), (px, bottom + 4), black, 1);
-            canvas.text(px - Canvas::text_width(label, 1) / 2, bottom + 8, label, 1, black);
+            canvas.text(
+                px - Canvas::text_width(label, 1) / 2,
+                bottom + 8,
+                label,
+                1,
+                black,
+            );
         }
         canvas.line((left, top), (left, bottom), black, 1);
         canvas.line((left, bottom), (right, bottom), black, 1);
@@ -320,7 +336,12 @@ impl LinePlot {
                 canvas.square(point, 2, colour);
             }
             let legend_y = top + 8 + index as i64 * 18;
-            canvas.line((right + 12, legend_y + 4), (right + 36, legend_y + 4), colour, 3);
+            canvas.line(
+                (right + 12, legend_y + 4),
+                (right + 36, legend_y + 4),
+                colour,
+                3,
+            );
             canvas.text(right + 42, legend_y, &series.name, 1, black);
         }
         Ok(canvas)
@@ -366,7 +387,10 @@ mod tests {
             .chunks(3)
             .filter(|p| p == &series_colour.as_slice())
             .count();
-        assert!(coloured > 100, "only {coloured} pixels of the series colour");
+        assert!(
+            coloured > 100,
+            "only {coloured} pixels of the series colour"
+        );
     }
 
     #[test]

@@ -1,0 +1,823 @@
+//! The evaluation harness: runs every method over every reference time of each sequence, in
+//! time order (the model's recurrent state carries across windows), scores the forecasts and
+//! collects the per-sequence, per-preset and overall summaries.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use evgate_core::{
+    events_in, BitMask, ForecastView, GateError, GateMode, MaskError, SensorSize, TimeSpan,
+    VoxelError, VoxelGrid, WindowError,
+};
+use evgate_io::sequence::LabelledSequence;
+use evgate_model::{ModelError, ModelRuntime};
+use thiserror::Error;
+
+use crate::binned::{BinnedMeans, LogBins};
+use crate::config::{ConfigError, EvalConfig};
+use crate::event_scores::EventConfusion;
+use crate::instances::match_instances;
+use crate::linear::extrapolate;
+use crate::method::{MethodInfo, MethodKind};
+use crate::oms::{
+    event_presence, normalised_response, oms_mask, threshold_response, OmsParameters,
+};
+use crate::report::{OmsSweepResult, PresetResult, Report, SequenceResult, SweepScores};
+use crate::segmentation::{PixelConfusion, SegmentationError};
+use crate::sequence::SequenceView;
+use crate::summary::{HorizonAccumulator, Mean, MethodAccumulator, MethodSummary};
+
+#[derive(Debug, Error)]
+pub enum HarnessError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("{path}: {source}")]
+    Model {
+        path: PathBuf,
+        source: Box<ModelError>,
+    },
+    #[error(
+        "model {model} expects a {expected} input but {sequence} has a {sensor} sensor (padded to \
+         {padded}); evaluate it on sequences of its resolution"
+    )]
+    InputSize {
+        model: String,
+        sequence: String,
+        sensor: SensorSize,
+        padded: SensorSize,
+        expected: SensorSize,
+    },
+    #[error("{sequence}: voxel grid: {source}")]
+    Voxel {
+        sequence: String,
+        source: VoxelError,
+    },
+    #[error("{sequence}: window ending at {reference_us} µs: {source}")]
+    Window {
+        sequence: String,
+        reference_us: i64,
+        source: WindowError,
+    },
+    #[error("{sequence}: at {reference_us} µs: {source}")]
+    Scoring {
+        sequence: String,
+        reference_us: i64,
+        source: SegmentationError,
+    },
+    #[error("{sequence}: mask at {reference_us} µs: {source}")]
+    Mask {
+        sequence: String,
+        reference_us: i64,
+        source: MaskError,
+    },
+    #[error("{sequence}: gating at {reference_us} µs: {source}")]
+    Gate {
+        sequence: String,
+        reference_us: i64,
+        source: GateError,
+    },
+    #[error(
+        "{sequence}: {field} has {actual} entries but the sequence has {expected} events \
+         (labels are needed for per-event scores)"
+    )]
+    Labels {
+        sequence: String,
+        field: &'static str,
+        actual: usize,
+        expected: usize,
+    },
+    #[error("no sequence was evaluated")]
+    NothingEvaluated,
+}
+
+/// A loaded network and the name it is reported under.
+pub struct LoadedModel {
+    pub label: String,
+    pub runtime: ModelRuntime,
+}
+
+/// The masks one method produced for one reference time.
+struct MethodOutput {
+    current: Vec<bool>,
+    futures: Vec<Vec<bool>>,
+    runtime: Duration,
+}
+
+/// Everything the scorer needs about one reference time.
+struct ReferenceTruth<'a> {
+    now: &'a [u8],
+    at_horizon: Vec<Option<&'a [u8]>>,
+    presence: Vec<bool>,
+    events_in_window: usize,
+    speed_px_per_s: Option<f64>,
+}
+
+/// Pooled per-frame scores of one method at the headline horizon.
+struct BinnedAccumulators {
+    events_per_window: BinnedMeans,
+    speed: BinnedMeans,
+}
+
+/// Runs the methods over sequences and collects their scores.
+pub struct Evaluation {
+    config: EvalConfig,
+    models: Vec<LoadedModel>,
+    methods: Vec<MethodInfo>,
+    sweep_settings: Vec<OmsParameters>,
+    sequences: Vec<SequenceResult>,
+    sweep_per_sequence: Vec<Vec<SweepScores>>,
+    binned: Vec<BinnedAccumulators>,
+    event_bins: LogBins,
+    started: Instant,
+}
+
+impl Evaluation {
+    /// `models[0]`, when present, is the model under test: its current mask also feeds the
+    /// no-forecast and linear baselines (as in the paper's ablation). Without a model those
+    /// baselines start from the ground-truth mask at the reference time.
+    pub fn new(config: EvalConfig, models: Vec<LoadedModel>) -> Result<Self, HarnessError> {
+        config.validate()?;
+        let mut methods = vec![MethodInfo::new(MethodKind::Oms(config.oms), &config, None)];
+        let source = models.first().map(|m| m.label.clone());
+        methods.push(MethodInfo::new(
+            MethodKind::NoForecast,
+            &config,
+            source.as_deref(),
+        ));
+        methods.push(MethodInfo::new(
+            MethodKind::Linear,
+            &config,
+            source.as_deref(),
+        ));
+        for (index, model) in models.iter().enumerate() {
+            let metadata = model.runtime.metadata();
+            methods.push(MethodInfo::model(index, &model.label, metadata, &config));
+        }
+        methods.push(MethodInfo::new(MethodKind::Oracle, &config, None));
+        let event_bins = LogBins {
+            first_decade: 2,
+            last_decade: 6,
+            per_decade: config.event_bins_per_decade.max(1),
+        };
+        let binned = methods
+            .iter()
+            .map(|_| BinnedAccumulators {
+                events_per_window: BinnedMeans::new(event_bins.count()),
+                speed: BinnedMeans::new(config.speed_bucket_edges_px_per_s.len() + 1),
+            })
+            .collect();
+        Ok(Self {
+            sweep_settings: config.oms_sweep.settings(),
+            config,
+            models,
+            methods,
+            sequences: Vec::new(),
+            sweep_per_sequence: Vec::new(),
+            binned,
+            event_bins,
+            started: Instant::now(),
+        })
+    }
+
+    pub fn config(&self) -> &EvalConfig {
+        &self.config
+    }
+
+    pub fn methods(&self) -> &[MethodInfo] {
+        &self.methods
+    }
+
+    /// Reference times that [`Self::evaluate_sequence`] will score for this sequence.
+    pub fn reference_count(&self, sequence: &LabelledSequence, path: &Path) -> usize {
+        SequenceView::new(sequence, path)
+            .reference_times(&self.config)
+            .len()
+    }
+
+    /// Scores one sequence; `on_reference` is called after each reference time (progress).
+    pub fn evaluate_sequence(
+        &mut self,
+        sequence: &LabelledSequence,
+        path: &Path,
+        mut on_reference: impl FnMut(),
+    ) -> Result<&SequenceResult, HarnessError> {
+        let view = SequenceView::new(sequence, path);
+        let size = sequence.sensor_size;
+        if sequence.labels.len() != sequence.events.len() {
+            return Err(HarnessError::Labels {
+                sequence: view.name.clone(),
+                field: "events_label",
+                actual: sequence.labels.len(),
+                expected: sequence.events.len(),
+            });
+        }
+        let mut voxel = VoxelGrid::new(size, 2).map_err(|source| HarnessError::Voxel {
+            sequence: view.name.clone(),
+            source,
+        })?;
+        for model in &mut self.models {
+            let expected = model.runtime.input_size();
+            if expected != voxel.padded() {
+                return Err(HarnessError::InputSize {
+                    model: model.label.clone(),
+                    sequence: view.name.clone(),
+                    sensor: size,
+                    padded: voxel.padded(),
+                    expected,
+                });
+            }
+            model
+                .runtime
+                .reset_state()
+                .map_err(|source| HarnessError::Model {
+                    path: model.runtime.model_path().to_path_buf(),
+                    source: Box::new(source),
+                })?;
+        }
+
+        let config = self.config.clone();
+        let horizons_us = config.horizons_us();
+        let horizons_ms_f32: Vec<f32> = config.horizons_ms.iter().map(|&h| h as f32).collect();
+        let window_us = i64::from(config.window_ms) * 1000;
+        let gate_span_us = i64::from(config.gate_span_ms) * 1000;
+        let headline = config.headline_index();
+        let mut accumulators: Vec<MethodAccumulator> = self
+            .methods
+            .iter()
+            .map(|_| MethodAccumulator::new(horizons_us.len()))
+            .collect();
+        let mut sweep: Vec<(HorizonAccumulator, Mean)> =
+            vec![Default::default(); self.sweep_settings.len()];
+        let mut previous_current: Option<(i64, Vec<bool>)> = None;
+        let references = view.reference_times(&config);
+
+        for &reference_us in &references {
+            let scoring_error = |source| HarnessError::Scoring {
+                sequence: view.name.clone(),
+                reference_us,
+                source,
+            };
+            let span = TimeSpan::new(reference_us - window_us, reference_us).map_err(|source| {
+                HarnessError::Window {
+                    sequence: view.name.clone(),
+                    reference_us,
+                    source,
+                }
+            })?;
+            // The window [t − 50 ms, t] includes its end, as the voxel grid does.
+            let window = events_in(
+                &sequence.events,
+                TimeSpan {
+                    start: span.start,
+                    end: span.end + 1,
+                },
+            );
+
+            // The recurrent state must see every window, even one we cannot score.
+            let mut model_outputs = Vec::with_capacity(self.models.len());
+            for model in &mut self.models {
+                voxel.clear();
+                voxel.accumulate(window, span);
+                voxel.normalise();
+                let output = model
+                    .runtime
+                    .forecast(voxel.as_slice(), &horizons_ms_f32)
+                    .map_err(|source| HarnessError::Model {
+                        path: model.runtime.model_path().to_path_buf(),
+                        source: Box::new(source),
+                    })?;
+                let stride = output.width();
+                let crop = |logits: &[f32]| crop_logits(logits, stride, size);
+                model_outputs.push(MethodOutput {
+                    current: crop(output.mask_logits()),
+                    futures: output.future_mask_logits().map(crop).collect(),
+                    runtime: output.inference_time(),
+                });
+            }
+
+            let Some(now) = view.truth_at(reference_us) else {
+                on_reference();
+                continue;
+            };
+            let truth = ReferenceTruth {
+                now,
+                at_horizon: horizons_us
+                    .iter()
+                    .map(|&h| view.truth_at(reference_us + h))
+                    .collect(),
+                presence: event_presence(window, size),
+                events_in_window: window.len(),
+                speed_px_per_s: view.object_speed_px_per_s(reference_us),
+            };
+
+            let (current_source, source_runtime) = match model_outputs.first() {
+                Some(output) => (output.current.clone(), output.runtime),
+                None => (now.iter().map(|&id| id != 0).collect(), Duration::ZERO),
+            };
+            let mut outputs: Vec<MethodOutput> = Vec::with_capacity(self.methods.len());
+            for method in &self.methods {
+                let output = match method.kind {
+                    MethodKind::Oms(parameters) => {
+                        let started = Instant::now();
+                        let mask = oms_mask(window, size, &parameters);
+                        let runtime = started.elapsed();
+                        MethodOutput {
+                            futures: vec![mask.clone(); horizons_us.len()],
+                            current: mask,
+                            runtime,
+                        }
+                    }
+                    MethodKind::NoForecast => MethodOutput {
+                        futures: vec![current_source.clone(); horizons_us.len()],
+                        current: current_source.clone(),
+                        runtime: source_runtime,
+                    },
+                    MethodKind::Linear => {
+                        let started = Instant::now();
+                        let (previous_us, previous) = previous_current
+                            .as_ref()
+                            .map_or((reference_us, &current_source), |(t, m)| (*t, m));
+                        let futures = extrapolate(
+                            previous,
+                            &current_source,
+                            size,
+                            reference_us - previous_us,
+                            &horizons_us,
+                            config.linear_max_match_distance_px,
+                        );
+                        MethodOutput {
+                            futures,
+                            current: current_source.clone(),
+                            runtime: source_runtime + started.elapsed(),
+                        }
+                    }
+                    MethodKind::Model(index) => {
+                        let output = &model_outputs[index];
+                        MethodOutput {
+                            current: output.current.clone(),
+                            futures: output.futures.clone(),
+                            runtime: output.runtime,
+                        }
+                    }
+                    MethodKind::Oracle => MethodOutput {
+                        current: now.iter().map(|&id| id != 0).collect(),
+                        futures: truth
+                            .at_horizon
+                            .iter()
+                            .map(|t| t.map_or_else(|| vec![false; size.pixels()], to_mask))
+                            .collect(),
+                        runtime: Duration::ZERO,
+                    },
+                };
+                outputs.push(output);
+            }
+            previous_current = Some((reference_us, current_source));
+
+            let gated = gated_events(sequence, reference_us, gate_span_us);
+            let gating_horizons: Vec<usize> = (0..horizons_us.len())
+                .filter(|&k| horizons_us[k] <= gate_span_us)
+                .collect();
+            let can_gate = gating_horizons
+                .iter()
+                .all(|&k| truth.at_horizon[k].is_some());
+            for (index, output) in outputs.iter().enumerate() {
+                let accumulator = &mut accumulators[index];
+                accumulator
+                    .runtime_ms
+                    .add(output.runtime.as_secs_f64() * 1e3);
+                let point = PixelConfusion::count_where(&output.current, now, &truth.presence)
+                    .map_err(scoring_error)?;
+                accumulator.point_iou.add(point.imo_iou());
+                for (k, future) in output.futures.iter().enumerate() {
+                    let Some(target) = truth.at_horizon[k] else {
+                        continue;
+                    };
+                    let pixels = PixelConfusion::count(future, target).map_err(scoring_error)?;
+                    let instances = match_instances(future, target, size, config.iou_threshold)
+                        .map_err(scoring_error)?;
+                    accumulator.horizons[k].add(&pixels, instances, config.iou_threshold);
+                    if k == headline {
+                        let binned = &mut self.binned[index];
+                        if let Some(bin) = self.event_bins.bin(truth.events_in_window as f64) {
+                            binned.events_per_window.add(bin, pixels.mean_iou());
+                        }
+                        if let Some(speed) = truth.speed_px_per_s {
+                            binned
+                                .speed
+                                .add(config.speed_bucket(speed), pixels.mean_iou());
+                        }
+                    }
+                }
+                if can_gate && !gated.0.is_empty() {
+                    let counts = score_events(
+                        &gated,
+                        reference_us,
+                        &gating_horizons,
+                        &horizons_us,
+                        &output.futures,
+                        size,
+                    )
+                    .map_err(|error| error.at(&view.name, reference_us))?;
+                    accumulator.events.merge(counts);
+                }
+            }
+            self.sweep_oms(&truth, size, headline, &mut sweep)
+                .map_err(scoring_error)?;
+            on_reference();
+        }
+
+        let methods = self
+            .methods
+            .iter()
+            .zip(&accumulators)
+            .map(|(method, accumulator)| {
+                (
+                    method.name.clone(),
+                    accumulator.summary(&config.horizons_ms, method.forecast_horizon_ms),
+                )
+            })
+            .collect();
+        self.sweep_per_sequence.push(
+            sweep
+                .iter()
+                .zip(&self.sweep_settings)
+                .map(|((horizon, point), &parameters)| {
+                    SweepScores::new(
+                        parameters,
+                        &horizon.summary(config.headline_horizon_ms),
+                        point,
+                    )
+                })
+                .collect(),
+        );
+        self.sequences.push(SequenceResult {
+            name: view.name.clone(),
+            path: path.to_path_buf(),
+            preset: view.preset.clone(),
+            sensor: size,
+            references: references.len(),
+            methods,
+        });
+        Ok(self.sequences.last().expect("just pushed"))
+    }
+
+    /// Scores every OMS setting of the sweep at the headline horizon and the current instant.
+    fn sweep_oms(
+        &self,
+        truth: &ReferenceTruth<'_>,
+        size: SensorSize,
+        headline: usize,
+        sweep: &mut [(HorizonAccumulator, Mean)],
+    ) -> Result<(), SegmentationError> {
+        let threshold = self.config.iou_threshold;
+        let mut responses: BTreeMap<(u32, u32), Vec<f32>> = BTreeMap::new();
+        for (setting, (horizon, point)) in self.sweep_settings.iter().zip(sweep.iter_mut()) {
+            let response = responses
+                .entry((setting.centre_radius, setting.surround_radius))
+                .or_insert_with(|| {
+                    normalised_response(
+                        &truth.presence,
+                        size,
+                        setting.centre_radius,
+                        setting.surround_radius,
+                    )
+                });
+            let mask = threshold_response(response, setting.threshold);
+            let current = PixelConfusion::count_where(&mask, truth.now, &truth.presence)?;
+            point.add(current.imo_iou());
+            if let Some(target) = truth.at_horizon[headline] {
+                let pixels = PixelConfusion::count(&mask, target)?;
+                let instances = match_instances(&mask, target, size, threshold)?;
+                horizon.add(&pixels, instances, threshold);
+            }
+        }
+        Ok(())
+    }
+
+    /// Averages per preset and overall, picks the best OMS setting and assembles the report.
+    pub fn finish(self, split: Option<String>) -> Result<Report, HarnessError> {
+        if self.sequences.is_empty() {
+            return Err(HarnessError::NothingEvaluated);
+        }
+        let average_over = |sequences: &[&SequenceResult]| -> BTreeMap<String, MethodSummary> {
+            self.methods
+                .iter()
+                .filter_map(|method| {
+                    let summaries: Vec<&MethodSummary> = sequences
+                        .iter()
+                        .filter_map(|s| s.methods.get(&method.name))
+                        .collect();
+                    Some((method.name.clone(), MethodSummary::average(&summaries)?))
+                })
+                .collect()
+        };
+        let mut preset_names: Vec<&str> =
+            self.sequences.iter().map(|s| s.preset.as_str()).collect();
+        preset_names.sort_unstable();
+        preset_names.dedup();
+        let presets = preset_names
+            .iter()
+            .map(|&preset| {
+                let members: Vec<&SequenceResult> = self
+                    .sequences
+                    .iter()
+                    .filter(|s| s.preset == preset)
+                    .collect();
+                PresetResult {
+                    preset: preset.to_owned(),
+                    sequences: members.len(),
+                    methods: average_over(&members),
+                }
+            })
+            .collect();
+        let all: Vec<&SequenceResult> = self.sequences.iter().collect();
+        let overall = average_over(&all);
+
+        let sweep_settings: Vec<SweepScores> = self
+            .sweep_settings
+            .iter()
+            .enumerate()
+            .map(|(k, &parameters)| {
+                let per_sequence: Vec<&SweepScores> =
+                    self.sweep_per_sequence.iter().map(|s| &s[k]).collect();
+                SweepScores::average(parameters, &per_sequence)
+            })
+            .collect();
+        let oms_sweep = OmsSweepResult::from_settings(self.config.oms, sweep_settings);
+
+        let bins = &self.event_bins;
+        let labels = self.config.speed_bucket_labels();
+        let edges = &self.config.speed_bucket_edges_px_per_s;
+        let mut events_per_window = BTreeMap::new();
+        let mut object_speed = BTreeMap::new();
+        for (method, binned) in self.methods.iter().zip(&self.binned) {
+            events_per_window.insert(
+                method.name.clone(),
+                binned
+                    .events_per_window
+                    .bins
+                    .iter()
+                    .enumerate()
+                    .map(|(k, mean)| {
+                        let (lower, upper) = bins.bounds(k);
+                        crate::binned::BinValue {
+                            label: format!("{lower:.0}-{upper:.0}"),
+                            lower: Some(lower),
+                            upper: Some(upper),
+                            frames: mean.count(),
+                            mean_iou: mean.value(),
+                        }
+                    })
+                    .collect(),
+            );
+            object_speed.insert(
+                method.name.clone(),
+                binned
+                    .speed
+                    .bins
+                    .iter()
+                    .enumerate()
+                    .map(|(k, mean)| crate::binned::BinValue {
+                        label: labels[k].clone(),
+                        lower: k.checked_sub(1).map(|i| edges[i]),
+                        upper: edges.get(k).copied(),
+                        frames: mean.count(),
+                        mean_iou: mean.value(),
+                    })
+                    .collect(),
+            );
+        }
+
+        Ok(Report {
+            split,
+            config: self.config,
+            methods: self.methods,
+            sequences: self.sequences,
+            presets,
+            overall,
+            oms_sweep,
+            events_per_window,
+            object_speed,
+            elapsed_s: self.started.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// Events of [t, t + span) with their labels.
+fn gated_events(
+    sequence: &LabelledSequence,
+    reference_us: i64,
+    span_us: i64,
+) -> (&[evgate_core::Event], &[u16]) {
+    let first = sequence.events.partition_point(|e| e.t < reference_us);
+    let last = sequence
+        .events
+        .partition_point(|e| e.t < reference_us + span_us);
+    (&sequence.events[first..last], &sequence.labels[first..last])
+}
+
+/// A gating failure before the sequence and time are known.
+enum GatingError {
+    Mask(MaskError),
+    Gate(GateError),
+}
+
+impl GatingError {
+    fn at(self, sequence: &str, reference_us: i64) -> HarnessError {
+        match self {
+            GatingError::Mask(source) => HarnessError::Mask {
+                sequence: sequence.to_owned(),
+                reference_us,
+                source,
+            },
+            GatingError::Gate(source) => HarnessError::Gate {
+                sequence: sequence.to_owned(),
+                reference_us,
+                source,
+            },
+        }
+    }
+}
+
+/// Gates the events with the forecast masks of the gating horizons (the gate kernel's
+/// horizon intervals) and counts flagged-as-IMO against the true labels.
+fn score_events(
+    (events, labels): &(&[evgate_core::Event], &[u16]),
+    reference_us: i64,
+    gating_horizons: &[usize],
+    horizons_us: &[i64],
+    futures: &[Vec<bool>],
+    size: SensorSize,
+) -> Result<EventConfusion, GatingError> {
+    let mut words = Vec::new();
+    for &k in gating_horizons {
+        let mut mask = BitMask::new(size).map_err(GatingError::Mask)?;
+        for (pixel, _) in futures[k].iter().enumerate().filter(|(_, &on)| on) {
+            let (x, y) = (
+                pixel % usize::from(size.width),
+                pixel / usize::from(size.width),
+            );
+            mask.set(x as u16, y as u16, true)
+                .map_err(GatingError::Mask)?;
+        }
+        words.extend_from_slice(mask.as_words());
+    }
+    let horizons: Vec<i64> = gating_horizons.iter().map(|&k| horizons_us[k]).collect();
+    let view =
+        ForecastView::new(reference_us, &horizons, size, &words).map_err(GatingError::Gate)?;
+    let word_count = events.len().div_ceil(64);
+    let (mut keep, mut judged) = (vec![0u64; word_count], vec![0u64; word_count]);
+    view.keep_bitmap(events, GateMode::KeepMovingObjects, &mut keep, &mut judged)
+        .map_err(GatingError::Gate)?;
+    let mut counts = EventConfusion::default();
+    for (i, &label) in labels.iter().enumerate() {
+        let bit = |words: &[u64]| words[i / 64] >> (i % 64) & 1 == 1;
+        if bit(&judged) {
+            counts.add(bit(&keep), label != 0);
+        }
+    }
+    Ok(counts)
+}
+
+fn to_mask(ids: &[u8]) -> Vec<bool> {
+    ids.iter().map(|&id| id != 0).collect()
+}
+
+/// The sensor-sized top-left corner of a padded logit plane, thresholded at 0 (sigmoid > 0.5).
+fn crop_logits(logits: &[f32], row_stride: usize, size: SensorSize) -> Vec<bool> {
+    let width = usize::from(size.width);
+    logits
+        .chunks(row_stride)
+        .take(usize::from(size.height))
+        .flat_map(|row| row[..width].iter().map(|&l| l > 0.0))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixture;
+
+    fn run(config: EvalConfig) -> Report {
+        let sequence = fixture::sequence();
+        let mut evaluation = Evaluation::new(config, Vec::new()).unwrap();
+        let path = Path::new("suite/test/slide-0001.npz");
+        let expected = evaluation.reference_count(&sequence, path);
+        let mut seen = 0;
+        evaluation
+            .evaluate_sequence(&sequence, path, || seen += 1)
+            .unwrap();
+        assert_eq!(seen, expected);
+        evaluation.finish(Some("test".to_owned())).unwrap()
+    }
+
+    fn small_config() -> EvalConfig {
+        EvalConfig {
+            oms_sweep: crate::config::OmsSweep {
+                centre_radii: vec![1, 2],
+                surround_radii: vec![4],
+                thresholds: vec![0.9, 0.96],
+            },
+            ..EvalConfig::default()
+        }
+    }
+
+    #[test]
+    fn oracle_is_perfect_where_truth_exists() {
+        let report = run(small_config());
+        let oracle = &report.overall["oracle"];
+        for horizon in &oracle.horizons {
+            assert_eq!(horizon.mean_iou, Some(1.0), "at {} ms", horizon.horizon_ms);
+            assert_eq!(horizon.instance_recall, Some(1.0));
+            assert_eq!(horizon.success_rate, Some(1.0));
+        }
+        assert_eq!(oracle.point_iou, Some(1.0));
+        // Edge events lie inside the object's mask at the 10 ms grid instant nearest to them,
+        // except the leading edge as the object moves between grid instants.
+        assert!(oracle.events.precision.unwrap() > 0.9);
+        assert!(oracle.events.recall.unwrap() > 0.5);
+    }
+
+    #[test]
+    fn linear_extrapolation_of_a_constant_velocity_beats_no_forecast() {
+        let report = run(small_config());
+        let at = |method: &str| report.overall[method].at(100).unwrap().clone();
+        let (still, moving) = (at("no-forecast"), at("linear"));
+        // The object moves 20 px in 100 ms, more than its 6 px width: the held mask misses it.
+        assert!(still.imo_iou.unwrap() == 0.0);
+        assert_eq!(still.instance_recall, Some(0.0));
+        // Constant velocity on an integer grid: linear extrapolation is exact after the first
+        // reference time (which has no previous window and so keeps still).
+        assert!(moving.imo_iou.unwrap() > 0.8, "{moving:?}");
+        assert!(moving.instance_recall.unwrap() > 0.8);
+        // At horizon 0 both equal the truth.
+        assert_eq!(
+            report.overall["no-forecast"].at(0).unwrap().mean_iou,
+            Some(1.0)
+        );
+    }
+
+    #[test]
+    fn references_and_presets_come_from_the_sequence() {
+        let report = run(small_config());
+        assert_eq!(report.presets.len(), 1);
+        assert_eq!(report.presets[0].preset, "slide");
+        assert_eq!(report.sequences[0].name, "slide-0001");
+        // ref_ts 50..400 ms; the first full window ends at 50 ms.
+        assert_eq!(report.sequences[0].references, 8);
+        // Horizons past the last truth frame (400 ms) are not scored.
+        let frames_at_100 = report.overall["oracle"].at(100).unwrap().frames;
+        assert_eq!(frames_at_100, 6);
+        assert_eq!(report.oms_sweep.settings.len(), 4);
+        assert!(report.oms_sweep.best.is_some());
+    }
+
+    #[test]
+    fn max_seconds_limits_the_references() {
+        let report = run(EvalConfig {
+            max_seconds_per_sequence: Some(0.2),
+            ..small_config()
+        });
+        assert_eq!(report.sequences[0].references, 4);
+    }
+
+    #[test]
+    fn labels_must_match_events() {
+        let mut sequence = fixture::sequence();
+        sequence.labels.pop();
+        let mut evaluation = Evaluation::new(small_config(), Vec::new()).unwrap();
+        let error = evaluation
+            .evaluate_sequence(&sequence, Path::new("x.npz"), || {})
+            .err()
+            .unwrap();
+        assert!(error.to_string().contains("events_label"), "{error}");
+    }
+
+    #[test]
+    fn finishing_without_sequences_is_an_error() {
+        let evaluation = Evaluation::new(small_config(), Vec::new()).unwrap();
+        assert!(matches!(
+            evaluation.finish(None),
+            Err(HarnessError::NothingEvaluated)
+        ));
+    }
+
+    #[test]
+    fn report_files_are_written() {
+        let report = run(small_config());
+        let folder = tempfile::tempdir().unwrap();
+        let written = crate::write_report(&report, folder.path()).unwrap();
+        let markdown = std::fs::read_to_string(&written.markdown).unwrap();
+        assert!(markdown.contains("(Table I)"));
+        assert!(markdown.contains("| slide |"));
+        let json: Report =
+            serde_json::from_str(&std::fs::read_to_string(&written.json).unwrap()).unwrap();
+        assert_eq!(json.sequences.len(), 1);
+        assert!(written
+            .plots
+            .iter()
+            .any(|p| p.ends_with("horizon-slide.png")));
+        assert!(written.plots.iter().all(|p| p.is_file()));
+    }
+}

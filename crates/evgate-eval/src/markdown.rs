@@ -1,0 +1,397 @@
+//! The Markdown tables of a report, laid out like the paper's tables (scores in percent).
+
+use std::fmt::Write;
+
+use crate::method::MethodKind;
+use crate::report::Report;
+use crate::summary::MethodSummary;
+
+fn percent(value: Option<f64>) -> String {
+    value.map_or_else(|| "–".to_owned(), |v| format!("{:.1}", v * 100.0))
+}
+
+fn number(value: Option<f64>, decimals: usize) -> String {
+    value.map_or_else(|| "–".to_owned(), |v| format!("{v:.decimals$}"))
+}
+
+fn row(cells: &[String]) -> String {
+    format!("| {} |\n", cells.join(" | "))
+}
+
+fn header(cells: &[String]) -> String {
+    let rule: Vec<String> = cells.iter().map(|_| "---".to_owned()).collect();
+    row(cells) + &row(&rule)
+}
+
+/// Rows of (label, per-preset summaries, overall summary).
+fn preset_columns(report: &Report) -> Vec<String> {
+    let mut columns: Vec<String> = report.presets.iter().map(|p| p.preset.clone()).collect();
+    columns.push("all".to_owned());
+    columns
+}
+
+fn method_summaries<'a>(report: &'a Report, method: &str) -> Vec<Option<&'a MethodSummary>> {
+    let mut summaries: Vec<Option<&MethodSummary>> = report
+        .presets
+        .iter()
+        .map(|p| p.methods.get(method))
+        .collect();
+    summaries.push(report.overall.get(method));
+    summaries
+}
+
+/// The whole report as Markdown; `plots` are the file names of the figures written beside it.
+pub fn render(report: &Report, plots: &[(String, String)]) -> String {
+    let headline = report.config.headline_horizon_ms;
+    let mut out = String::new();
+    let split = report
+        .split
+        .as_deref()
+        .map_or_else(String::new, |s| format!(" — split `{s}`"));
+    let _ = writeln!(out, "# evgate evaluation{split}\n");
+    let presets: Vec<String> = report
+        .presets
+        .iter()
+        .map(|p| format!("{} ({})", p.preset, p.sequences))
+        .collect();
+    let references: usize = report.sequences.iter().map(|s| s.references).sum();
+    let _ = writeln!(
+        out,
+        "{} sequences ({}), {} reference times, horizons {:?} ms, headline horizon {} ms; \
+         scores averaged per sequence, then over sequences; run took {:.0} s.\n",
+        report.sequences.len(),
+        presets.join(", "),
+        references,
+        report.config.horizons_ms,
+        headline,
+        report.elapsed_s
+    );
+    let _ = writeln!(out, "Methods:\n");
+    for method in &report.methods {
+        let _ = writeln!(out, "- `{}`: {}", method.name, method.description);
+    }
+    out.push('\n');
+
+    let forecasters: Vec<&str> = report
+        .methods
+        .iter()
+        .filter(|m| !matches!(m.kind, MethodKind::Oracle))
+        .map(|m| m.name.as_str())
+        .collect();
+
+    // Table I
+    let _ = writeln!(
+        out,
+        "## Future prediction at t + {headline} ms: mIoU / R@0.5 (%) (Table I)\n"
+    );
+    let mut cells = vec!["preset".to_owned()];
+    cells.extend(forecasters.iter().map(|m| format!("{m} mIoU / R@0.5")));
+    out += &header(&cells);
+    for (index, column) in preset_columns(report).iter().enumerate() {
+        let mut cells = vec![column.clone()];
+        for method in &forecasters {
+            let at = method_summaries(report, method)[index].and_then(|s| s.at(headline));
+            cells.push(format!(
+                "{} / {}",
+                percent(at.and_then(|h| h.mean_iou)),
+                percent(at.and_then(|h| h.instance_recall))
+            ));
+        }
+        out += &row(&cells);
+    }
+    out.push('\n');
+
+    // All headline metrics.
+    let _ = writeln!(
+        out,
+        "## All metrics, all sequences (mIoU, IMO IoU, SR@0.5, R@0.5 at t + {headline} ms; pIoU at t; \
+         per-event scores of the gate over [t, t + {} ms))\n",
+        report.config.gate_span_ms
+    );
+    out += &header(
+        &[
+            "method",
+            "mIoU",
+            "IMO IoU",
+            "SR@0.5",
+            "R@0.5",
+            "pIoU",
+            "event precision",
+            "event recall",
+            "event F1",
+        ]
+        .map(str::to_owned),
+    );
+    for method in &report.methods {
+        let Some(summary) = report.overall.get(&method.name) else {
+            continue;
+        };
+        let at = summary.at(headline);
+        out += &row(&[
+            method.name.clone(),
+            percent(at.and_then(|h| h.mean_iou)),
+            percent(at.and_then(|h| h.imo_iou)),
+            percent(at.and_then(|h| h.success_rate)),
+            percent(at.and_then(|h| h.instance_recall)),
+            percent(summary.point_iou),
+            percent(summary.events.precision),
+            percent(summary.events.recall),
+            percent(summary.events.f1),
+        ]);
+    }
+    out.push('\n');
+
+    // OMS sweep
+    let _ = writeln!(
+        out,
+        "## OMS: published setting and best of the sweep (all sequences)\n\n\
+         The best setting is chosen by mIoU at t + {headline} ms on the evaluated sequences \
+         themselves ({} settings), so it is an optimistic bound for OMS.\n",
+        report.oms_sweep.settings.len()
+    );
+    out += &header(
+        &[
+            "setting",
+            "centre r",
+            "surround r",
+            "threshold",
+            "mIoU",
+            "R@0.5",
+            "SR@0.5",
+            "pIoU",
+        ]
+        .map(str::to_owned),
+    );
+    for (label, scores) in [
+        ("published", &report.oms_sweep.published),
+        ("best of sweep", &report.oms_sweep.best),
+    ] {
+        if let Some(s) = scores {
+            out += &row(&[
+                label.to_owned(),
+                s.parameters.centre_radius.to_string(),
+                s.parameters.surround_radius.to_string(),
+                s.parameters.threshold.to_string(),
+                percent(s.mean_iou),
+                percent(s.instance_recall),
+                percent(s.success_rate),
+                percent(s.point_iou),
+            ]);
+        }
+    }
+    out.push('\n');
+
+    // Table II
+    let _ = writeln!(out, "## Current instant: pIoU (%) (Table II)\n");
+    let mut cells = vec!["method".to_owned()];
+    cells.extend(preset_columns(report));
+    out += &header(&cells);
+    for method in report.methods.iter().filter(|m| {
+        matches!(
+            m.kind,
+            MethodKind::Oms(_) | MethodKind::Model(_) | MethodKind::Oracle
+        )
+    }) {
+        let mut cells = vec![method.name.clone()];
+        cells.extend(
+            method_summaries(report, &method.name)
+                .iter()
+                .map(|s| percent(s.and_then(|s| s.point_iou))),
+        );
+        out += &row(&cells);
+    }
+    out.push('\n');
+
+    // Table III
+    let _ = writeln!(
+        out,
+        "## Runtime, prediction age and GFLOPs (Table III)\n\n\
+         Runtime is the wall time per window on this machine (the model: the ONNX Runtime call; \
+         no-forecast and linear include the model that makes their current mask). Prediction \
+         age = forecast horizon − runtime. GFLOPs are analytical, at 640×480.\n"
+    );
+    out += &header(
+        &[
+            "method",
+            "runtime mean (ms)",
+            "runtime std (ms)",
+            "prediction age (ms)",
+            "GFLOPs",
+        ]
+        .map(str::to_owned),
+    );
+    for method in report
+        .methods
+        .iter()
+        .filter(|m| !matches!(m.kind, MethodKind::Oracle))
+    {
+        let Some(summary) = report.overall.get(&method.name) else {
+            continue;
+        };
+        out += &row(&[
+            method.name.clone(),
+            number(summary.runtime_ms_mean, 2),
+            number(summary.runtime_ms_std, 2),
+            number(summary.prediction_age_ms, 1),
+            number(method.gflops, 3),
+        ]);
+    }
+    out.push('\n');
+
+    // Table VI
+    let primary_size = report
+        .models()
+        .next()
+        .and_then(|m| m.model.as_ref())
+        .map(|m| m.size.clone());
+    let _ = writeln!(
+        out,
+        "## Ablation: mIoU (%) at t + {headline} ms (Table VI)\n"
+    );
+    let mut cells = vec!["FW".to_owned(), "ATC".to_owned()];
+    cells.extend(preset_columns(report));
+    out += &header(&cells);
+    let mut ablation_rows: Vec<(String, String, &str)> = vec![
+        ("×".to_owned(), "×".to_owned(), "no-forecast"),
+        ("linear".to_owned(), "×".to_owned(), "linear"),
+    ];
+    for method in report.models() {
+        let info = method.model.as_ref().expect("models() only yields models");
+        if Some(&info.size) != primary_size.as_ref() {
+            continue;
+        }
+        let atc = if info.atc == "none" {
+            "×".to_owned()
+        } else {
+            format!("✓ ({})", info.atc)
+        };
+        ablation_rows.push(("✓".to_owned(), atc, method.name.as_str()));
+    }
+    for (flow_warping, atc, method) in ablation_rows {
+        let mut cells = vec![flow_warping, atc];
+        cells.extend(
+            method_summaries(report, method)
+                .iter()
+                .map(|s| percent(s.and_then(|s| s.at(headline)).and_then(|h| h.mean_iou))),
+        );
+        out += &row(&cells);
+    }
+    out.push('\n');
+
+    // Table VII
+    let primary_atc = report
+        .models()
+        .next()
+        .and_then(|m| m.model.as_ref())
+        .map(|m| m.atc.clone());
+    let _ = writeln!(
+        out,
+        "## Model sizes: mIoU (%) at t + {headline} ms (Table VII)\n"
+    );
+    let mut cells = vec!["model".to_owned(), "size".to_owned()];
+    cells.extend(preset_columns(report));
+    out += &header(&cells);
+    let mut sized: Vec<_> = report
+        .models()
+        .filter(|m| m.model.as_ref().map(|i| &i.atc) == primary_atc.as_ref())
+        .collect();
+    let order = ["XS", "S", "M", "L"];
+    sized.sort_by_key(|m| {
+        order
+            .iter()
+            .position(|s| Some(*s) == m.model.as_ref().map(|i| i.size.as_str()))
+    });
+    for method in sized {
+        let mut cells = vec![
+            method.name.clone(),
+            method
+                .model
+                .as_ref()
+                .map_or_else(String::new, |i| i.size.clone()),
+        ];
+        cells.extend(
+            method_summaries(report, &method.name)
+                .iter()
+                .map(|s| percent(s.and_then(|s| s.at(headline)).and_then(|h| h.mean_iou))),
+        );
+        out += &row(&cells);
+    }
+    out.push('\n');
+
+    // Horizon curves as numbers.
+    let _ = writeln!(out, "## mIoU (%) against horizon, all sequences\n");
+    let mut cells = vec!["method".to_owned()];
+    cells.extend(report.config.horizons_ms.iter().map(|h| format!("{h} ms")));
+    out += &header(&cells);
+    for method in &forecasters {
+        if let Some(summary) = report.overall.get(*method) {
+            let mut cells = vec![(*method).to_owned()];
+            cells.extend(summary.horizons.iter().map(|h| percent(h.mean_iou)));
+            out += &row(&cells);
+        }
+    }
+    out.push('\n');
+
+    for (title, binned) in [
+        ("events per window", &report.events_per_window),
+        ("object speed (px/s)", &report.object_speed),
+    ] {
+        let _ = writeln!(
+            out,
+            "## mIoU (%) at t + {headline} ms by {title} (frames pooled over sequences)\n"
+        );
+        let Some(first) = forecasters.iter().find_map(|m| binned.get(*m)) else {
+            continue;
+        };
+        let mut cells = vec!["method".to_owned()];
+        cells.extend(first.iter().map(|b| b.label.clone()));
+        out += &header(&cells);
+        let mut frames = vec!["frames".to_owned()];
+        frames.extend(first.iter().map(|b| b.frames.to_string()));
+        out += &row(&frames);
+        for method in &forecasters {
+            if let Some(bins) = binned.get(*method) {
+                let mut cells = vec![(*method).to_owned()];
+                cells.extend(bins.iter().map(|b| percent(b.mean_iou)));
+                out += &row(&cells);
+            }
+        }
+        out.push('\n');
+    }
+
+    if !plots.is_empty() {
+        let _ = writeln!(out, "## Plots\n");
+        for (title, file) in plots {
+            let _ = writeln!(out, "![{title}]({file})\n");
+        }
+    }
+
+    let _ = writeln!(
+        out,
+        "## Per sequence (mIoU / R@0.5 at t + {headline} ms, %)\n"
+    );
+    let mut cells = vec![
+        "sequence".to_owned(),
+        "preset".to_owned(),
+        "refs".to_owned(),
+    ];
+    cells.extend(forecasters.iter().map(|m| (*m).to_owned()));
+    out += &header(&cells);
+    for sequence in &report.sequences {
+        let mut cells = vec![
+            sequence.name.clone(),
+            sequence.preset.clone(),
+            sequence.references.to_string(),
+        ];
+        for method in &forecasters {
+            let at = sequence.methods.get(*method).and_then(|s| s.at(headline));
+            cells.push(format!(
+                "{} / {}",
+                percent(at.and_then(|h| h.mean_iou)),
+                percent(at.and_then(|h| h.instance_recall))
+            ));
+        }
+        out += &row(&cells);
+    }
+    out
+}
