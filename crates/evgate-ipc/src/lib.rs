@@ -34,3 +34,6 @@ pub use stats::PipelineStats;
 
 /// The iceoryx2 service flavour every evgate process uses: inter-process shared memory.
 pub type Service = iceoryx2::service::ipc::Service;
+
+/// The iceoryx2 node of an evgate process (see [`create_node`]).
+pub type Node = iceoryx2::prelude::Node<Service>;

@@ -1,1 +1,429 @@
-fn main() -> anyhow::Result<()> { Ok(()) }
+//! `evgate-ingest`: publishes events from a recording or the built-in simulated camera on the
+//! `<domain>/<camera>/events` stream (and their ground-truth labels on `.../labels` when the
+//! source knows them), batched by duration or count, paced by the event timestamps or as fast as
+//! possible.
+
+mod batcher;
+mod pacing;
+mod source;
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use clap::Parser;
+use evgate_core::Event;
+use evgate_ipc::{
+    clock, create_node, BatchFlags, BatchHeader, Overflow, PipelineNames, Qos, SlicePublisher,
+    Stream,
+};
+use evgate_sim::Preset;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use tracing::{info, warn};
+use tracing_subscriber::EnvFilter;
+
+use batcher::{BatchSize, Batcher};
+use pacing::Pacer;
+use source::{EventSource, InMemory, SimulatedCamera};
+
+/// Publish events into an evgate pipeline over shared memory.
+#[derive(Parser, Debug)]
+#[command(name = "evgate-ingest", version, about)]
+struct Args {
+    /// Pipeline domain: the first part of every service name (use a unique one per pipeline).
+    #[arg(long, default_value = "evgate")]
+    domain: String,
+    /// Camera name within the domain: the second part of every service name.
+    #[arg(long, default_value = "cam0")]
+    camera: String,
+    /// Event file to publish (a labelled-sequence .npz, published with its labels). Without it,
+    /// the built-in simulated camera is used.
+    #[arg(long)]
+    input: Option<PathBuf>,
+    /// Scene of the simulated camera: boxes, floor, wall, table, fast, tabletop or driving.
+    #[arg(long, default_value = "boxes")]
+    preset: Preset,
+    /// Seed of the simulated scene (same seed, same events).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Simulated time per pass of the simulated camera, seconds.
+    #[arg(long, default_value_t = 10.0)]
+    sim_duration_s: f64,
+    /// Worker threads of the simulated camera's renderer.
+    #[arg(long, default_value_t = 1)]
+    sim_threads: usize,
+    /// Batch span in milliseconds (batches cut by time; ignored with --batch-events).
+    #[arg(long, default_value_t = 1.0)]
+    batch_ms: f64,
+    /// Cut batches of this many events instead of by time.
+    #[arg(long)]
+    batch_events: Option<usize>,
+    /// Publish as fast as possible instead of at the pace of the event timestamps.
+    #[arg(long)]
+    fast: bool,
+    /// Replay speed when pacing by timestamps: stream seconds per wall-clock second.
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Start over when the source ends, until stopped (stream time keeps increasing).
+    #[arg(long = "loop")]
+    repeat: bool,
+    /// Do not publish ground-truth labels even when the source knows them.
+    #[arg(long)]
+    no_labels: bool,
+    /// Wait until this many subscribers listen to the events stream before publishing.
+    #[arg(long, default_value_t = 0)]
+    wait_for_subscribers: usize,
+    /// Longest wait for those subscribers, seconds (then publish anyway).
+    #[arg(long, default_value_t = 30.0)]
+    wait_timeout_s: f64,
+    /// What to do when a subscriber's buffer is full: block (up to --block-timeout-ms, then
+    /// drop and count) or drop-and-count.
+    #[arg(long, value_enum, default_value = "block")]
+    overflow: Overflow,
+    /// Longest wait for a full subscriber under --overflow block, milliseconds.
+    #[arg(long, default_value_t = 500)]
+    block_timeout_ms: u64,
+    /// Print a JSON summary on stdout when done.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What the run did, printed at exit.
+#[derive(Debug, Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct IngestSummary {
+    stream_id: u64,
+    source: String,
+    sensor_width: u16,
+    sensor_height: u16,
+    events_published: u64,
+    batches_published: u64,
+    labels_published: bool,
+    passes: i64,
+    /// Event batches some subscriber did not get (full buffer under the overflow policy).
+    undelivered_batches: u64,
+    /// Start of the first non-empty batch's span, microseconds.
+    first_batch_begin_us: Option<i64>,
+    /// End (exclusive) of the last non-empty batch's span, microseconds.
+    last_batch_end_us: Option<i64>,
+    wall_s: f64,
+    events_per_s: f64,
+    /// `end-of-stream` or `signal`.
+    ended_by: &'static str,
+}
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| EnvFilter::new("info,iceoryx2_bb_loggers=error")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let args = Args::parse();
+    validate(&args)?;
+    let summary = run(&args)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        info!(?summary, "ingest finished");
+    }
+    Ok(())
+}
+
+fn validate(args: &Args) -> anyhow::Result<()> {
+    if !(args.batch_ms > 0.0 && args.batch_ms.is_finite()) {
+        bail!(
+            "--batch-ms = {} must be a positive number of milliseconds",
+            args.batch_ms
+        );
+    }
+    if args.batch_events == Some(0) {
+        bail!("--batch-events = 0 must be at least 1");
+    }
+    if !(args.speed > 0.0 && args.speed.is_finite()) {
+        bail!("--speed = {} must be a positive factor", args.speed);
+    }
+    if !(args.sim_duration_s > 0.0 && args.sim_duration_s.is_finite()) {
+        bail!(
+            "--sim-duration-s = {} must be a positive number of seconds",
+            args.sim_duration_s
+        );
+    }
+    Ok(())
+}
+
+fn open_source(args: &Args) -> anyhow::Result<(Box<dyn EventSource>, String)> {
+    match &args.input {
+        Some(path) => {
+            let source = InMemory::labelled_sequence(path)?;
+            Ok((Box::new(source), path.display().to_string()))
+        }
+        None => {
+            let duration_us = (args.sim_duration_s * 1e6).round() as i64;
+            let mut camera = SimulatedCamera::new(args.preset, args.seed, duration_us, 1_000);
+            camera.set_threads(args.sim_threads);
+            Ok((
+                Box::new(camera),
+                format!(
+                    "simulated camera, preset {} seed {}",
+                    args.preset, args.seed
+                ),
+            ))
+        }
+    }
+}
+
+/// An id that differs between runs, so readers notice a restarted ingest.
+fn new_stream_id() -> u64 {
+    let mixed =
+        clock::monotonic_ns() ^ (u64::from(std::process::id()) << 40) ^ clock::wall_us() as u64;
+    // SplitMix64 finaliser: spreads nearby inputs over the whole range.
+    let mut z = mixed.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+fn run(args: &Args) -> anyhow::Result<IngestSummary> {
+    let names = PipelineNames::new(&args.domain, &args.camera)?;
+    let node = create_node("evgate-ingest")?;
+    let (mut source, description) = open_source(args)?;
+    let sensor = source.sensor();
+    let qos = Qos {
+        overflow: args.overflow,
+        block_timeout_ms: args.block_timeout_ms,
+        initial_max_slice_len: args.batch_events.unwrap_or(4096),
+        ..Qos::default()
+    };
+    let events = SlicePublisher::<Event, BatchHeader>::open(&node, &names, Stream::Events, &qos)?;
+    let labels = if source.has_labels() && !args.no_labels {
+        Some(SlicePublisher::<u16, BatchHeader>::open(
+            &node,
+            &names,
+            Stream::Labels,
+            &qos,
+        )?)
+    } else {
+        None
+    };
+    info!(service = events.service_name(), source = %description, %sensor, "publishing");
+    if !wait_for_subscribers(&node, &events, args)? {
+        let nothing = Totals::default();
+        return Ok(summary_of(
+            &description,
+            sensor,
+            0,
+            &nothing,
+            Instant::now(),
+            "signal",
+            labels.is_some(),
+        ));
+    }
+
+    let stream_id = new_stream_id();
+    let size = match args.batch_events {
+        Some(count) => BatchSize::Count { events: count },
+        None => BatchSize::Duration {
+            micros: ((args.batch_ms * 1e3).round() as i64).max(1),
+        },
+    };
+    let mut batcher = Batcher::new(size);
+    let mut pacer = Pacer::new(args.speed);
+    let progress = ProgressBar::new_spinner();
+    progress.set_style(
+        ProgressStyle::with_template(
+            "{spinner} {elapsed} {human_pos} events published ({per_sec})",
+        )
+        .context("progress bar template")?,
+    );
+    let mut totals = Totals::default();
+    let mut restarted = false;
+    let started = Instant::now();
+    let mut ended_by = "end-of-stream";
+    loop {
+        let Some(batch) = batcher.next_batch(source.as_mut()) else {
+            if args.repeat {
+                totals.passes += 1;
+                source.restart(totals.passes);
+                batcher.resume();
+                restarted = true;
+                continue;
+            }
+            break;
+        };
+        let wait = if args.fast {
+            Duration::ZERO
+        } else {
+            pacer.wait_before(batch.t_end_us, Instant::now())
+        };
+        if node.wait(wait).is_err() {
+            ended_by = "signal";
+            break;
+        }
+        let mut flags = 0;
+        if batch.last && !args.repeat {
+            flags |= BatchFlags::END_OF_STREAM;
+        }
+        if std::mem::take(&mut restarted) {
+            flags |= BatchFlags::STREAM_RESTARTED;
+        }
+        let mut header = BatchHeader {
+            stream_id,
+            sequence: totals.batches,
+            first_event_index: totals.events,
+            event_count: batch.events.len() as u64,
+            t_begin_us: batch.t_begin_us,
+            t_end_us: batch.t_end_us,
+            published_at_monotonic_ns: 0,
+            width: sensor.width,
+            height: sensor.height,
+            flags,
+        };
+        if let Some(labels) = &labels {
+            // Labels go first so a reader joining by sequence never waits for them.
+            labels.publish(header, batch.labels)?;
+        }
+        header.published_at_monotonic_ns = clock::monotonic_ns();
+        let delivery = events.publish(header, batch.events)?;
+        totals.record(&header, delivery.undelivered);
+        if delivery.undelivered > 0 {
+            // A reader that stopped taking samples may have died: free its port so later
+            // batches do not wait for it.
+            node.try_cleanup_dead_nodes();
+        }
+        progress.set_position(totals.events);
+        if header.is_end_of_stream() {
+            totals.end_of_stream_sent = true;
+        }
+    }
+    if !totals.end_of_stream_sent {
+        publish_end_of_stream(&events, labels.as_ref(), stream_id, sensor, &mut totals)?;
+    }
+    progress.finish_and_clear();
+    Ok(summary_of(
+        &description,
+        sensor,
+        stream_id,
+        &totals,
+        started,
+        ended_by,
+        labels.is_some(),
+    ))
+}
+
+/// Counts of what was published.
+#[derive(Default)]
+struct Totals {
+    events: u64,
+    batches: u64,
+    undelivered: u64,
+    first_begin: Option<i64>,
+    last_end: Option<i64>,
+    end_of_stream_sent: bool,
+    /// Completed restarts of a looping source.
+    passes: i64,
+}
+
+impl Totals {
+    fn record(&mut self, header: &BatchHeader, undelivered: usize) {
+        self.events += header.event_count;
+        self.batches += 1;
+        self.undelivered += (undelivered > 0) as u64;
+        if header.event_count > 0 {
+            self.first_begin.get_or_insert(header.t_begin_us);
+            self.last_end = Some(header.t_end_us);
+        }
+    }
+}
+
+/// An empty batch flagged end-of-stream tells every reader that nothing follows.
+fn publish_end_of_stream(
+    events: &SlicePublisher<Event, BatchHeader>,
+    labels: Option<&SlicePublisher<u16, BatchHeader>>,
+    stream_id: u64,
+    sensor: evgate_core::SensorSize,
+    totals: &mut Totals,
+) -> anyhow::Result<()> {
+    let t = totals.last_end.unwrap_or(0);
+    let mut header = BatchHeader {
+        stream_id,
+        sequence: totals.batches,
+        first_event_index: totals.events,
+        event_count: 0,
+        t_begin_us: t,
+        t_end_us: t,
+        published_at_monotonic_ns: 0,
+        width: sensor.width,
+        height: sensor.height,
+        flags: BatchFlags::END_OF_STREAM,
+    };
+    if let Some(labels) = labels {
+        labels.publish(header, &[])?;
+    }
+    header.published_at_monotonic_ns = clock::monotonic_ns();
+    let delivery = events.publish(header, &[])?;
+    totals.record(&header, delivery.undelivered);
+    totals.end_of_stream_sent = true;
+    Ok(())
+}
+
+/// Waits (sleeping in short node cycles, so signals still end it) until enough subscribers are
+/// connected; false when a signal arrived.
+fn wait_for_subscribers(
+    node: &evgate_ipc::Node,
+    events: &SlicePublisher<Event, BatchHeader>,
+    args: &Args,
+) -> anyhow::Result<bool> {
+    if args.wait_for_subscribers == 0 {
+        return Ok(true);
+    }
+    let deadline = Instant::now() + Duration::from_secs_f64(args.wait_timeout_s.max(0.0));
+    while events.subscriber_count() < args.wait_for_subscribers {
+        if Instant::now() >= deadline {
+            warn!(
+                connected = events.subscriber_count(),
+                wanted = args.wait_for_subscribers,
+                "publishing before every expected subscriber connected"
+            );
+            return Ok(true);
+        }
+        if node.wait(Duration::from_millis(10)).is_err() {
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+fn summary_of(
+    description: &str,
+    sensor: evgate_core::SensorSize,
+    stream_id: u64,
+    totals: &Totals,
+    started: Instant,
+    ended_by: &'static str,
+    labels_published: bool,
+) -> IngestSummary {
+    let wall_s = started.elapsed().as_secs_f64();
+    IngestSummary {
+        stream_id,
+        source: description.to_owned(),
+        sensor_width: sensor.width,
+        sensor_height: sensor.height,
+        events_published: totals.events,
+        batches_published: totals.batches,
+        labels_published,
+        passes: totals.passes + 1,
+        undelivered_batches: totals.undelivered,
+        first_batch_begin_us: totals.first_begin,
+        last_batch_end_us: totals.last_end,
+        wall_s,
+        events_per_s: if wall_s > 0.0 {
+            totals.events as f64 / wall_s
+        } else {
+            0.0
+        },
+        ended_by,
+    }
+}

@@ -1,0 +1,186 @@
+//! Where events come from: the built-in simulated camera or a file, delivered in chunks with a
+//! watermark (no later event is older than it), so batches can be cut by time.
+
+use std::path::{Path, PathBuf};
+
+use evgate_core::{Event, SensorSize};
+use evgate_io::LabelledSequence;
+use evgate_sim::{LabelledEvent, Preset, Simulator};
+
+/// Source failures.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    #[error("cannot read labelled sequence {path}: {reason}")]
+    Sequence { path: PathBuf, reason: String },
+    #[error("input {path} has no events")]
+    Empty { path: PathBuf },
+}
+
+/// A chunk appended by [`EventSource::next_chunk`].
+pub enum Chunk {
+    /// Events were appended; every later event has `t >= watermark_us`.
+    Events { watermark_us: i64 },
+    /// The source is exhausted.
+    End,
+}
+
+/// Produces events in time order, with their ground-truth labels when known.
+pub trait EventSource {
+    fn sensor(&self) -> SensorSize;
+    /// True when the source knows which object caused each event.
+    fn has_labels(&self) -> bool;
+    /// Appends the next chunk of events (and labels, when known) to the buffers.
+    fn next_chunk(&mut self, events: &mut Vec<Event>, labels: &mut Vec<u16>) -> Chunk;
+    /// Starts pass number `pass` (1 for the first repetition) over from the first event, shifted
+    /// by `pass` times the source's span so stream time keeps increasing across loops.
+    fn restart(&mut self, pass: i64);
+}
+
+/// The built-in simulated camera, generating events incrementally for `duration_us`.
+pub struct SimulatedCamera {
+    preset: Preset,
+    seed: u64,
+    simulator: Simulator,
+    duration_us: i64,
+    step_us: i64,
+    offset_us: i64,
+    threads: usize,
+    scratch: Vec<LabelledEvent>,
+}
+
+impl SimulatedCamera {
+    /// `step_us` is how much simulated time one chunk covers.
+    pub fn new(preset: Preset, seed: u64, duration_us: i64, step_us: i64) -> Self {
+        Self {
+            preset,
+            seed,
+            simulator: Simulator::from_preset(preset, seed),
+            duration_us,
+            step_us: step_us.max(1),
+            offset_us: 0,
+            threads: 1,
+            scratch: Vec::new(),
+        }
+    }
+
+    /// Limits the renderer to `threads` worker threads.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
+        self.simulator.set_threads(self.threads);
+    }
+}
+
+impl EventSource for SimulatedCamera {
+    fn sensor(&self) -> SensorSize {
+        self.simulator.sensor()
+    }
+
+    fn has_labels(&self) -> bool {
+        true
+    }
+
+    fn next_chunk(&mut self, events: &mut Vec<Event>, labels: &mut Vec<u16>) -> Chunk {
+        let now = self.simulator.time_us();
+        if now >= self.duration_us {
+            return Chunk::End;
+        }
+        let until = (now + self.step_us).min(self.duration_us);
+        self.scratch.clear();
+        self.simulator.advance(until, &mut self.scratch);
+        for labelled in &self.scratch {
+            let mut event = labelled.event;
+            event.t += self.offset_us;
+            events.push(event);
+            labels.push(labelled.label);
+        }
+        // `advance` delivered every event up to `until` inclusive.
+        Chunk::Events {
+            watermark_us: until + 1 + self.offset_us,
+        }
+    }
+
+    fn restart(&mut self, pass: i64) {
+        let threads = self.threads;
+        self.simulator = Simulator::from_preset(self.preset, self.seed);
+        self.simulator.set_threads(threads);
+        // One pass delivers the events of (0, duration].
+        self.offset_us = pass * self.duration_us;
+    }
+}
+
+/// Events held in memory (a decoded file), handed out in fixed-size chunks.
+pub struct InMemory {
+    events: Vec<Event>,
+    labels: Option<Vec<u16>>,
+    sensor: SensorSize,
+    next: usize,
+    offset_us: i64,
+}
+
+/// Events per chunk of an in-memory source: small enough to start publishing at once.
+const IN_MEMORY_CHUNK: usize = 65_536;
+
+impl InMemory {
+    /// Reads a labelled-sequence `.npz` (docs/sequence-format.md): events with labels.
+    pub fn labelled_sequence(path: &Path) -> Result<Self, SourceError> {
+        let sequence = LabelledSequence::read(path).map_err(|error| SourceError::Sequence {
+            path: path.to_owned(),
+            reason: error.to_string(),
+        })?;
+        if sequence.events.is_empty() {
+            return Err(SourceError::Empty {
+                path: path.to_owned(),
+            });
+        }
+        Ok(Self {
+            events: sequence.events,
+            labels: Some(sequence.labels),
+            sensor: sequence.sensor_size,
+            next: 0,
+            offset_us: 0,
+        })
+    }
+
+    /// Time from the first to one past the last event.
+    pub fn span_us(&self) -> i64 {
+        match (self.events.first(), self.events.last()) {
+            (Some(first), Some(last)) => last.t - first.t + 1,
+            _ => 0,
+        }
+    }
+}
+
+impl EventSource for InMemory {
+    fn sensor(&self) -> SensorSize {
+        self.sensor
+    }
+
+    fn has_labels(&self) -> bool {
+        self.labels.is_some()
+    }
+
+    fn next_chunk(&mut self, events: &mut Vec<Event>, labels: &mut Vec<u16>) -> Chunk {
+        if self.next >= self.events.len() {
+            return Chunk::End;
+        }
+        let end = (self.next + IN_MEMORY_CHUNK).min(self.events.len());
+        let offset = self.offset_us;
+        events.extend(self.events[self.next..end].iter().map(|event| Event {
+            t: event.t + offset,
+            ..*event
+        }));
+        if let Some(known) = &self.labels {
+            labels.extend_from_slice(&known[self.next..end]);
+        }
+        self.next = end;
+        // Files are in time order, so nothing later is older than the last event handed out.
+        Chunk::Events {
+            watermark_us: self.events[end - 1].t + offset,
+        }
+    }
+
+    fn restart(&mut self, pass: i64) {
+        self.next = 0;
+        self.offset_us = pass * self.span_us();
+    }
+}
