@@ -1,8 +1,30 @@
 //! Event file decoders and encoders, and the labelled-sequence `.npz` format shared by the
 //! simulator, training and evaluation.
+//!
+//! Reading: [`open`] detects the format (magic bytes, `%` header, extension) and returns a
+//! streaming [`EventReader`]; memory stays bounded whatever the file size. What a decoder
+//! drops, skips or finds out of order is counted in its [`DecodeReport`] (policy in
+//! [`report`]). Writing: [`create`] picks an [`EventWriter`] by extension.
 
+pub mod aedat4;
+pub mod csv;
+pub mod dat;
+pub mod error;
+pub mod evt2;
+pub mod evt3;
+pub mod flatbuffer;
+pub mod format;
+pub mod header;
+pub mod native;
 pub mod npy;
 pub mod npz;
+pub mod reader;
+pub mod report;
 pub mod sequence;
+pub mod source;
 
+pub use error::DecodeError;
+pub use format::{detect, Format};
+pub use reader::{open, open_with, read_all, EventReader, OpenOptions};
+pub use report::DecodeReport;
 pub use sequence::{LabelledSequence, SequenceError};

@@ -1,0 +1,286 @@
+//! iniVation AEDAT 4.0: `#!AER-DAT4.0\r\n`, a 32-bit length and an `IOHE` FlatBuffer header
+//! (compression, data-table position, XML stream description), then packets of a 32-bit stream
+//! id, a 32-bit size and a (compressed) size-prefixed FlatBuffer. Only the packets of the event
+//! stream (`typeIdentifier` `EVTS`) are decoded; IMU, trigger and frame packets are passed over
+//! by stream id. Reading stops at the data table (the file's index), or at end of file when the
+//! recording was not finalised.
+
+use std::io::Read;
+
+use evgate_core::{Event, SensorSize};
+
+use crate::error::DecodeError;
+use crate::flatbuffer::Table;
+use crate::report::{Admission, DecodeReport};
+use crate::source::ByteSource;
+
+pub const MAGIC: &[u8; 14] = b"#!AER-DAT4.0\r\n";
+/// A packet larger than this is taken for corruption rather than allocated.
+const MAX_PACKET_BYTES: usize = 256 * 1024 * 1024;
+/// Decompressed packets are capped too, so a corrupt stream cannot inflate without bound.
+const MAX_DECOMPRESSED_BYTES: u64 = 1024 * 1024 * 1024;
+const EVENT_BYTES: usize = 16;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Compression {
+    None,
+    Lz4,
+    Zstd,
+}
+
+pub struct Aedat4Decoder {
+    source: ByteSource,
+    admission: Admission,
+    compression: Compression,
+    event_stream: i32,
+    /// Where the data table starts (packets end there); `None` when not finalised.
+    data_end: Option<u64>,
+    packet: Vec<u8>,
+}
+
+impl Aedat4Decoder {
+    /// Reads the magic and header; `source` must be at the start of the file. `sensor_size`
+    /// overrides the size in the stream description.
+    pub fn new(
+        mut source: ByteSource,
+        sensor_size: Option<SensorSize>,
+    ) -> Result<Self, DecodeError> {
+        let path = source.path().to_path_buf();
+        let bad = |offset: u64, problem: String| DecodeError::BadHeader {
+            path: path.clone(),
+            offset,
+            problem,
+        };
+        let magic = source.read_exact(MAGIC.len(), "the AEDAT 4 magic")?;
+        if magic != MAGIC {
+            return Err(bad(
+                0,
+                format!(
+                    "magic {:?} is not {:?}",
+                    String::from_utf8_lossy(magic),
+                    "#!AER-DAT4.0\\r\\n"
+                ),
+            ));
+        }
+        let length_bytes = source.read_exact(4, "the AEDAT 4 header length")?;
+        let length = u32::from_le_bytes(length_bytes.try_into().expect("4 bytes")) as usize;
+        if length > MAX_PACKET_BYTES {
+            return Err(bad(14, format!("header length {length} is implausible")));
+        }
+        let header_offset = source.offset();
+        let header = source.read_exact(length, "the AEDAT 4 header")?.to_vec();
+        let flatbuffer =
+            |e: crate::flatbuffer::FlatbufferError| bad(header_offset + e.offset as u64, e.problem);
+        let table = Table::root(&header, Some(b"IOHE")).map_err(flatbuffer)?;
+        let compression = match table.i32_field(0, 0).map_err(flatbuffer)? {
+            0 => Compression::None,
+            1 | 2 => Compression::Lz4,
+            3 | 4 => Compression::Zstd,
+            other => {
+                return Err(bad(
+                    header_offset,
+                    format!("compression {other} is unknown (accepted: 0 none, 1-2 LZ4, 3-4 ZSTD)"),
+                ))
+            }
+        };
+        let data_table = table.i64_field(1, -1).map_err(flatbuffer)?;
+        let info = table.string_field(2).map_err(flatbuffer)?.ok_or_else(|| {
+            bad(
+                header_offset,
+                "the header has no stream description (infoNode)".into(),
+            )
+        })?;
+        let (event_stream, described_size) =
+            event_stream(info).map_err(|problem| bad(header_offset, problem))?;
+        let sensor_size = sensor_size.or(described_size).ok_or_else(|| {
+            bad(
+                header_offset,
+                format!("event stream {event_stream} has no sizeX/sizeY; pass the sensor size"),
+            )
+        })?;
+        Ok(Self {
+            source,
+            admission: Admission::new(sensor_size),
+            compression,
+            event_stream,
+            data_end: u64::try_from(data_table).ok().filter(|&p| p > 0),
+            packet: Vec::new(),
+        })
+    }
+
+    pub fn sensor_size(&self) -> SensorSize {
+        self.admission.sensor_size()
+    }
+
+    pub fn report(&self) -> &DecodeReport {
+        &self.admission.report
+    }
+
+    pub fn bytes_read(&self) -> u64 {
+        self.source.offset()
+    }
+
+    /// Clears `out` and fills it with the events of the next event packet; 0 means end.
+    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
+        out.clear();
+        while out.is_empty() {
+            if self.data_end.is_some_and(|end| self.source.offset() >= end)
+                || self.source.peek()?.is_none()
+            {
+                break;
+            }
+            let packet_offset = self.source.offset();
+            let head = self.source.read_exact(8, "an AEDAT 4 packet header")?;
+            let stream = i32::from_le_bytes(head[..4].try_into().expect("4 bytes"));
+            let size = i32::from_le_bytes(head[4..].try_into().expect("4 bytes"));
+            let size = usize::try_from(size)
+                .ok()
+                .filter(|&s| s <= MAX_PACKET_BYTES)
+                .ok_or_else(|| {
+                    self.malformed(packet_offset + 4, format!("packet size {size} is invalid"))
+                })?;
+            let body_offset = self.source.offset();
+            let body = self.source.read_exact(size, "an AEDAT 4 packet")?;
+            if stream != self.event_stream {
+                continue;
+            }
+            let body = body.to_vec();
+            self.decompress(&body, body_offset)?;
+            self.decode_packet(out, body_offset)?;
+        }
+        Ok(out.len())
+    }
+
+    fn malformed(&self, offset: u64, problem: String) -> DecodeError {
+        DecodeError::Malformed {
+            path: self.source.path().to_path_buf(),
+            offset,
+            problem,
+        }
+    }
+
+    fn decompress(&mut self, body: &[u8], offset: u64) -> Result<(), DecodeError> {
+        self.packet.clear();
+        let result = match self.compression {
+            Compression::None => {
+                self.packet.extend_from_slice(body);
+                Ok(0)
+            }
+            Compression::Lz4 => lz4_flex::frame::FrameDecoder::new(body)
+                .take(MAX_DECOMPRESSED_BYTES)
+                .read_to_end(&mut self.packet),
+            Compression::Zstd => zstd::stream::read::Decoder::new(body)
+                .and_then(|d| d.take(MAX_DECOMPRESSED_BYTES).read_to_end(&mut self.packet)),
+        };
+        result.map(|_| ()).map_err(|e| {
+            self.malformed(
+                offset,
+                format!(
+                    "event packet does not decompress ({:?}): {e}",
+                    self.compression
+                ),
+            )
+        })
+    }
+
+    fn decode_packet(&mut self, out: &mut Vec<Event>, offset: u64) -> Result<(), DecodeError> {
+        let packet = std::mem::take(&mut self.packet);
+        let decoded = (|| {
+            // Size-prefixed: the FlatBuffer proper starts after its 32-bit length.
+            let buffer = packet.get(4..).unwrap_or_default();
+            let table = Table::root(buffer, Some(b"EVTS"))?;
+            table.struct_vector(0, EVENT_BYTES)
+        })();
+        let elements = decoded
+            .map_err(|e| self.malformed(offset, format!("event packet (decompressed) {e}")))?;
+        for record in elements.unwrap_or_default().chunks_exact(EVENT_BYTES) {
+            let event = Event::new(
+                i64::from_le_bytes(record[..8].try_into().expect("8 bytes")),
+                i16::from_le_bytes([record[8], record[9]]) as u16,
+                i16::from_le_bytes([record[10], record[11]]) as u16,
+                record[12] != 0,
+            );
+            // Packets are decompressed whole, so the best offset is the packet's.
+            self.admission.admit(out, event, offset);
+        }
+        self.packet = packet;
+        Ok(())
+    }
+}
+
+/// Finds the event stream in the XML description: its id and, when given, its size.
+fn event_stream(info: &str) -> Result<(i32, Option<SensorSize>), String> {
+    let mut streams: Vec<(i32, String)> = Vec::new();
+    for node in info.split("<node ").skip(1) {
+        let Some(path) = attribute(node, "path") else {
+            continue;
+        };
+        let Some(rest) = path.split("/outInfo/").nth(1) else {
+            continue;
+        };
+        let Ok(id) = rest.split('/').next().unwrap_or_default().parse::<i32>() else {
+            continue;
+        };
+        match streams.iter_mut().find(|(known, _)| *known == id) {
+            Some((_, text)) => text.push_str(node),
+            None => streams.push((id, node.to_owned())),
+        }
+    }
+    let (id, text) = streams
+        .iter()
+        .find(|(_, text)| value(text, "typeIdentifier").as_deref() == Some("EVTS"))
+        .ok_or_else(|| {
+            format!(
+                "no event stream (typeIdentifier EVTS) among {} described streams",
+                streams.len()
+            )
+        })?;
+    let size = value(text, "sizeX")
+        .zip(value(text, "sizeY"))
+        .and_then(|(w, h)| Some(SensorSize::new(w.parse().ok()?, h.parse().ok()?)));
+    Ok((*id, size))
+}
+
+fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
+    let start = tag.find(&format!("{name}=\""))? + name.len() + 2;
+    let len = tag[start..].find('"')?;
+    Some(&tag[start..start + len])
+}
+
+/// The text of `<attr key="key" ...>text</attr>`.
+fn value(text: &str, key: &str) -> Option<String> {
+    let start = text.find(&format!("key=\"{key}\""))?;
+    let open = start + text[start..].find('>')? + 1;
+    let len = text[open..].find("</attr>")?;
+    Some(text[open..open + len].trim().to_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const INFO: &str = r#"<dv version="2.0">
+    <node name="outInfo" path="/mainloop/Recorder/outInfo/">
+        <node name="1" path="/mainloop/Recorder/outInfo/1/">
+            <attr key="typeIdentifier" type="string">IMUS</attr>
+        </node>
+        <node name="3" path="/mainloop/Recorder/outInfo/3/">
+            <attr key="typeIdentifier" type="string">EVTS</attr>
+            <node name="info" path="/mainloop/Recorder/outInfo/3/info/">
+                <attr key="sizeX" type="int">346</attr>
+                <attr key="sizeY" type="int">260</attr>
+            </node>
+        </node>
+    </node>
+</dv>"#;
+
+    #[test]
+    fn event_stream_and_size_come_from_the_description() {
+        assert_eq!(
+            event_stream(INFO).unwrap(),
+            (3, Some(SensorSize::new(346, 260)))
+        );
+        let err = event_stream(&INFO.replace("EVTS", "FRME")).unwrap_err();
+        assert!(err.contains("no event stream"), "{err}");
+    }
+}

@@ -1,0 +1,213 @@
+//! Text events, one per line: `t x y p`, separated by commas and/or whitespace (CSV, the ECD /
+//! EVIMO `events.txt` layout).
+//!
+//! - An optional header line (its first field not a number, e.g. `t,x,y,p`) and lines starting
+//!   with `#` are passed over; so are blank lines.
+//! - The time unit is chosen by the first event line: a time written with a decimal point or an
+//!   exponent (`0.003811`, `1e-3`) means seconds for the whole file, an integer means
+//!   microseconds. Seconds are rounded to the nearest microsecond.
+//! - Polarity: `1` = ON; `0` or `-1` = OFF.
+//! - Anything else is an error naming the line, its byte offset and the field.
+
+use evgate_core::{Event, SensorSize};
+
+use crate::error::DecodeError;
+use crate::report::{Admission, DecodeReport};
+use crate::source::ByteSource;
+
+/// Events per chunk.
+const CHUNK_EVENTS: usize = 64 * 1024;
+const MAX_LINE: usize = 4096;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TimeUnit {
+    Microseconds,
+    Seconds,
+}
+
+pub struct CsvDecoder {
+    source: ByteSource,
+    admission: Admission,
+    unit: Option<TimeUnit>,
+    line_number: u64,
+    header_allowed: bool,
+}
+
+impl CsvDecoder {
+    /// Text files carry no sensor size: the caller gives it (events outside are dropped and
+    /// counted).
+    pub fn new(source: ByteSource, sensor_size: SensorSize) -> Self {
+        Self {
+            source,
+            admission: Admission::new(sensor_size),
+            unit: None,
+            line_number: 0,
+            header_allowed: true,
+        }
+    }
+
+    pub fn sensor_size(&self) -> SensorSize {
+        self.admission.sensor_size()
+    }
+
+    pub fn report(&self) -> &DecodeReport {
+        &self.admission.report
+    }
+
+    pub fn bytes_read(&self) -> u64 {
+        self.source.offset()
+    }
+
+    /// Clears `out` and fills it with up to 65 536 events; 0 means end of stream.
+    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
+        out.clear();
+        while out.len() < CHUNK_EVENTS {
+            let Some((offset, line)) = self.source.read_line(MAX_LINE)? else {
+                break;
+            };
+            self.line_number += 1;
+            let text = std::str::from_utf8(&line)
+                .map_err(|_| self.error(offset, "is not UTF-8 text".into()))?;
+            let text = text.trim();
+            if text.is_empty() || text.starts_with('#') {
+                continue;
+            }
+            let fields: Vec<&str> = text
+                .split(|c: char| c == ',' || c.is_whitespace())
+                .filter(|f| !f.is_empty())
+                .collect();
+            let first_is_number = fields.first().is_some_and(|f| f.parse::<f64>().is_ok());
+            if self.header_allowed && !first_is_number {
+                self.header_allowed = false;
+                continue;
+            }
+            self.header_allowed = false;
+            let event = self.parse(offset, &fields)?;
+            self.admission.admit(out, event, offset);
+        }
+        Ok(out.len())
+    }
+
+    fn error(&self, offset: u64, problem: String) -> DecodeError {
+        DecodeError::Malformed {
+            path: self.source.path().to_path_buf(),
+            offset,
+            problem: format!("line {} {problem}", self.line_number),
+        }
+    }
+
+    fn parse(&mut self, offset: u64, fields: &[&str]) -> Result<Event, DecodeError> {
+        if fields.len() != 4 {
+            return Err(self.error(
+                offset,
+                format!("has {} fields, expected 4 (t x y p)", fields.len()),
+            ));
+        }
+        let looks_fractional = fields[0].contains(['.', 'e', 'E']);
+        let unit = *self.unit.get_or_insert(if looks_fractional {
+            TimeUnit::Seconds
+        } else {
+            TimeUnit::Microseconds
+        });
+        let t = match (unit, looks_fractional) {
+            (TimeUnit::Microseconds, false) => fields[0].parse::<i64>().ok(),
+            (TimeUnit::Microseconds, true) => fields[0]
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && v.abs() < 9e18)
+                .map(|v| v.round() as i64),
+            (TimeUnit::Seconds, _) => fields[0]
+                .parse::<f64>()
+                .ok()
+                .map(|v| v * 1e6)
+                .filter(|v| v.is_finite() && v.abs() < 9e18)
+                .map(|v| v.round() as i64),
+        }
+        .ok_or_else(|| self.error(offset, format!("field t: `{}` is not a time", fields[0])))?;
+        let coordinate = |index: usize, name: &str| {
+            fields[index].parse::<u16>().map_err(|_| {
+                self.error(
+                    offset,
+                    format!(
+                        "field {name}: `{}` is not a coordinate in 0..=65535",
+                        fields[index]
+                    ),
+                )
+            })
+        };
+        let x = coordinate(1, "x")?;
+        let y = coordinate(2, "y")?;
+        let on = match fields[3] {
+            "1" | "+1" => true,
+            "0" | "-1" => false,
+            other => {
+                return Err(self.error(
+                    offset,
+                    format!("field p: `{other}` is not a polarity (accepted: 1, 0, -1)"),
+                ))
+            }
+        };
+        Ok(Event::new(t, x, y, on))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Cursor;
+
+    use super::*;
+
+    fn decode(text: &str) -> Result<(Vec<Event>, DecodeReport), DecodeError> {
+        let source = ByteSource::new(
+            "mem.csv".into(),
+            Box::new(Cursor::new(text.as_bytes().to_vec())),
+        );
+        let mut decoder = CsvDecoder::new(source, SensorSize::new(10, 10));
+        let (mut all, mut chunk) = (Vec::new(), Vec::new());
+        while decoder.read_chunk(&mut chunk)? > 0 {
+            all.extend_from_slice(&chunk);
+        }
+        Ok((all, decoder.report().clone()))
+    }
+
+    #[test]
+    fn header_separators_and_units() {
+        let (events, _) = decode("t,x,y,p\n10,1,2,1\n# note\n\n11 , 3, 4 ,0\n").unwrap();
+        assert_eq!(
+            events,
+            vec![Event::new(10, 1, 2, true), Event::new(11, 3, 4, false)]
+        );
+        let (events, _) = decode("0.000010 1 2 1\r\n0.0000115\t3 4 -1\n").unwrap();
+        assert_eq!(
+            events,
+            vec![Event::new(10, 1, 2, true), Event::new(12, 3, 4, false)]
+        );
+    }
+
+    #[test]
+    fn bad_lines_name_line_offset_and_field() {
+        let err = decode("t,x,y,p\n1,2,3,1\n2,x,3,1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("line 3") && err.contains("offset 16") && err.contains("field x"),
+            "{err}"
+        );
+        let err = decode("1,2,3,7\n").unwrap_err().to_string();
+        assert!(err.contains("field p") && err.contains("`7`"), "{err}");
+        let err = decode("1,2,3\n").unwrap_err().to_string();
+        assert!(err.contains("3 fields"), "{err}");
+        let err = decode("t,x,y,p\nt,x,y,p\n").unwrap_err().to_string();
+        assert!(err.contains("line 2") && err.contains("field t"), "{err}");
+    }
+
+    #[test]
+    fn empty_text_has_no_events_and_outside_events_are_counted() {
+        assert!(decode("").unwrap().0.is_empty());
+        let (events, report) = decode("1,10,0,1\n2,0,0,1\n1,0,0,1\n").unwrap();
+        assert_eq!(events.len(), 2);
+        assert_eq!(report.dropped_out_of_sensor, 1);
+        assert_eq!(report.time_regressions, 1);
+        assert_eq!(report.first_time_regression_index, Some(1));
+    }
+}

@@ -1,0 +1,145 @@
+//! Prophesee RAW EVT 2.0: 32-bit little-endian words, the type in the top 4 bits.
+//!
+//! `CD_OFF` (0x0) / `CD_ON` (0x1): 6 low time bits at 22..28, x at 11..22, y at 0..11;
+//! `TIME_HIGH` (0x8): bits 6..34 of the time; `EXT_TRIGGER` (0xA), `OTHERS` (0xE) and
+//! `CONTINUED` (0xF) carry no CD events and are passed over; any other type is skipped and
+//! counted. A `TIME_HIGH` smaller than the previous one is a wrap of the 34-bit time.
+
+use evgate_core::{Event, SensorSize};
+
+use crate::error::DecodeError;
+use crate::report::{Admission, DecodeReport};
+use crate::source::ByteSource;
+
+const TIME_HIGH_WRAP: i64 = 1 << 34;
+
+pub struct Evt2Decoder {
+    source: ByteSource,
+    admission: Admission,
+    time_high: i64,
+    wraps: i64,
+}
+
+impl Evt2Decoder {
+    /// `source` must be positioned after the `%` header.
+    pub fn new(source: ByteSource, sensor_size: SensorSize) -> Self {
+        Self {
+            source,
+            admission: Admission::new(sensor_size),
+            time_high: 0,
+            wraps: 0,
+        }
+    }
+
+    pub fn sensor_size(&self) -> SensorSize {
+        self.admission.sensor_size()
+    }
+
+    pub fn report(&self) -> &DecodeReport {
+        &self.admission.report
+    }
+
+    pub fn bytes_read(&self) -> u64 {
+        self.source.offset()
+    }
+
+    /// Clears `out` and fills it with the events of the next block; 0 means end of stream.
+    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
+        out.clear();
+        while out.is_empty() {
+            let (start, bytes) = self.source.next_records(4, "an EVT 2.0 word")?;
+            if bytes.is_empty() {
+                break;
+            }
+            for (i, word) in bytes.chunks_exact(4).enumerate() {
+                let word = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
+                let offset = start + 4 * i as u64;
+                match word >> 28 {
+                    kind @ (0x0 | 0x1) => {
+                        let t = self.wraps + self.time_high + ((word >> 22) & 0x3f) as i64;
+                        let x = ((word >> 11) & 0x7ff) as u16;
+                        let y = (word & 0x7ff) as u16;
+                        self.admission
+                            .admit(out, Event::new(t, x, y, kind == 1), offset);
+                    }
+                    0x8 => {
+                        let time_high = ((word & 0x0fff_ffff) as i64) << 6;
+                        if time_high < self.time_high {
+                            self.wraps += TIME_HIGH_WRAP;
+                        }
+                        self.time_high = time_high;
+                    }
+                    0xA | 0xE | 0xF => {}
+                    _ => self.admission.report.skip_word(offset),
+                }
+            }
+        }
+        Ok(out.len())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Cursor;
+
+    use super::*;
+
+    fn decode(words: &[u32]) -> (Vec<Event>, DecodeReport) {
+        let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        let source = ByteSource::new("mem.raw".into(), Box::new(Cursor::new(bytes)));
+        let mut decoder = Evt2Decoder::new(source, SensorSize::new(640, 480));
+        let (mut all, mut chunk) = (Vec::new(), Vec::new());
+        while decoder.read_chunk(&mut chunk).unwrap() > 0 {
+            all.extend_from_slice(&chunk);
+        }
+        (all, decoder.report().clone())
+    }
+
+    fn cd(on: bool, t_low: u32, x: u32, y: u32) -> u32 {
+        ((on as u32) << 28) | (t_low << 22) | (x << 11) | y
+    }
+
+    #[test]
+    fn words_decode_to_events_with_time_high_and_wrap() {
+        let (events, report) = decode(&[
+            0x8000_0002,
+            cd(true, 5, 10, 20),
+            0xA000_0000,
+            cd(false, 63, 639, 479),
+            0x8000_0001,
+            cd(true, 0, 1, 2),
+        ]);
+        assert_eq!(
+            events,
+            vec![
+                Event::new(133, 10, 20, true),
+                Event::new(191, 639, 479, false),
+                Event::new((1 << 34) + 64, 1, 2, true),
+            ]
+        );
+        assert!(report.is_clean());
+    }
+
+    #[test]
+    fn unknown_types_and_out_of_sensor_events_are_counted() {
+        let (events, report) = decode(&[0x3000_0000, cd(true, 0, 640, 0), cd(true, 1, 0, 0)]);
+        assert_eq!(events.len(), 1);
+        assert_eq!(report.skipped_words, 1);
+        assert_eq!(report.first_skipped_word_offset, Some(0));
+        assert_eq!(report.dropped_out_of_sensor, 1);
+        assert_eq!(report.first_out_of_sensor_offset, Some(4));
+    }
+
+    #[test]
+    fn a_partial_word_at_the_end_is_an_error_with_its_offset() {
+        let source = ByteSource::new(
+            "cut.raw".into(),
+            Box::new(Cursor::new(vec![1, 0, 0, 0x10, 7, 7])),
+        );
+        let mut decoder = Evt2Decoder::new(source, SensorSize::new(640, 480));
+        let mut chunk = Vec::new();
+        assert_eq!(decoder.read_chunk(&mut chunk).unwrap(), 1);
+        let err = decoder.read_chunk(&mut chunk).unwrap_err().to_string();
+        assert!(err.contains("cut.raw") && err.contains("offset 4"), "{err}");
+    }
+}

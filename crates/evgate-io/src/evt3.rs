@@ -1,0 +1,193 @@
+//! Prophesee RAW EVT 3.0: 16-bit little-endian words, the type in the top 4 bits.
+//!
+//! `ADDR_Y` (0x0): row; `ADDR_X` (0x2): one event at x with polarity bit 11; `VECT_BASE_X`
+//! (0x3): base column and polarity for the vectors that follow; `VECT_12` (0x4) / `VECT_8`
+//! (0x5): a bit mask of events at base, base+1, … after which the base advances by 12 / 8;
+//! `TIME_LOW` (0x6) / `TIME_HIGH` (0x8): bits 0..12 / 12..24 of the time. A `TIME_HIGH` smaller
+//! than the previous one is a wrap of the 24-bit time. `CONTINUED_4` (0x7), `EXT_TRIGGER`
+//! (0xA), `OTHERS` (0xE) and `CONTINUED_12` (0xF) carry no CD events and are passed over; any
+//! other type is skipped and counted.
+//!
+//! A `TIME_LOW` smaller than the previous one under the same `TIME_HIGH` is taken at face value
+//! (the event time steps back and the regression is counted): it is not a wrap, since the
+//! sensor sends a new `TIME_HIGH` whenever bit 12 changes.
+
+use evgate_core::{Event, SensorSize};
+
+use crate::error::DecodeError;
+use crate::report::{Admission, DecodeReport};
+use crate::source::ByteSource;
+
+const TIME_HIGH_WRAP: i64 = 1 << 24;
+
+pub struct Evt3Decoder {
+    source: ByteSource,
+    admission: Admission,
+    time_low: i64,
+    time_high: i64,
+    wraps: i64,
+    y: u16,
+    base_x: u16,
+    vector_on: bool,
+}
+
+impl Evt3Decoder {
+    /// `source` must be positioned after the `%` header.
+    pub fn new(source: ByteSource, sensor_size: SensorSize) -> Self {
+        Self {
+            source,
+            admission: Admission::new(sensor_size),
+            time_low: 0,
+            time_high: 0,
+            wraps: 0,
+            y: 0,
+            base_x: 0,
+            vector_on: false,
+        }
+    }
+
+    pub fn sensor_size(&self) -> SensorSize {
+        self.admission.sensor_size()
+    }
+
+    pub fn report(&self) -> &DecodeReport {
+        &self.admission.report
+    }
+
+    pub fn bytes_read(&self) -> u64 {
+        self.source.offset()
+    }
+
+    /// Clears `out` and fills it with the events of the next block; 0 means end of stream.
+    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
+        out.clear();
+        while out.is_empty() {
+            let (start, bytes) = self.source.next_records(2, "an EVT 3.0 word")?;
+            if bytes.is_empty() {
+                break;
+            }
+            for (i, word) in bytes.chunks_exact(2).enumerate() {
+                let word = u16::from_le_bytes([word[0], word[1]]);
+                let offset = start + 2 * i as u64;
+                let t = self.wraps + (self.time_high << 12) + self.time_low;
+                match word >> 12 {
+                    0x0 => self.y = word & 0x7ff,
+                    0x2 => {
+                        let on = word & 0x800 != 0;
+                        self.admission
+                            .admit(out, Event::new(t, word & 0x7ff, self.y, on), offset);
+                    }
+                    0x3 => {
+                        self.base_x = word & 0x7ff;
+                        self.vector_on = word & 0x800 != 0;
+                    }
+                    kind @ (0x4 | 0x5) => {
+                        let (width, mask) = if kind == 0x4 {
+                            (12, word & 0xfff)
+                        } else {
+                            (8, word & 0xff)
+                        };
+                        let mut bits = mask;
+                        while bits != 0 {
+                            let bit = bits.trailing_zeros() as u16;
+                            bits &= bits - 1;
+                            // Columns past the 11-bit range wrap in the sensor's arithmetic;
+                            // saturating keeps them off the sensor so they are dropped and counted.
+                            let x = self.base_x.saturating_add(bit);
+                            self.admission.admit(
+                                out,
+                                Event::new(t, x, self.y, self.vector_on),
+                                offset,
+                            );
+                        }
+                        self.base_x = self.base_x.saturating_add(width);
+                    }
+                    0x6 => self.time_low = (word & 0xfff) as i64,
+                    0x8 => {
+                        let time_high = (word & 0xfff) as i64;
+                        if time_high < self.time_high {
+                            self.wraps += TIME_HIGH_WRAP;
+                        }
+                        self.time_high = time_high;
+                    }
+                    0x7 | 0xA | 0xE | 0xF => {}
+                    _ => self.admission.report.skip_word(offset),
+                }
+            }
+        }
+        Ok(out.len())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Cursor;
+
+    use super::*;
+
+    fn decode(words: &[u16], sensor_size: SensorSize) -> (Vec<Event>, DecodeReport) {
+        let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        let source = ByteSource::new("mem.raw".into(), Box::new(Cursor::new(bytes)));
+        let mut decoder = Evt3Decoder::new(source, sensor_size);
+        let (mut all, mut chunk) = (Vec::new(), Vec::new());
+        while decoder.read_chunk(&mut chunk).unwrap() > 0 {
+            all.extend_from_slice(&chunk);
+        }
+        (all, decoder.report().clone())
+    }
+
+    #[test]
+    fn single_and_vector_events_decode() {
+        let (events, report) = decode(
+            &[
+                0x8003, // time high 3
+                0x6005, // time low 5
+                0x0007, // y 7
+                0x2804, // x 4 ON
+                0x3010, // base x 16 OFF
+                0x4005, // vect12: bits 0, 2
+                0x5001, // vect8 at base 28: bit 0
+                0xA001, // trigger: passed over
+            ],
+            SensorSize::new(64, 8),
+        );
+        let t = (3 << 12) + 5;
+        assert_eq!(
+            events,
+            vec![
+                Event::new(t, 4, 7, true),
+                Event::new(t, 16, 7, false),
+                Event::new(t, 18, 7, false),
+                Event::new(t, 28, 7, false),
+            ]
+        );
+        assert!(report.is_clean());
+    }
+
+    #[test]
+    fn time_high_wrap_adds_24_bits_and_time_low_steps_back_are_counted() {
+        let (events, report) = decode(
+            &[
+                0x8fff, 0x6010, 0x2001, 0x8000, 0x6002, 0x2001, 0x6001, 0x2001,
+            ],
+            SensorSize::new(8, 8),
+        );
+        let times: Vec<i64> = events.iter().map(|e| e.t).collect();
+        assert_eq!(
+            times,
+            vec![(0xfff << 12) + 0x10, (1 << 24) + 2, (1 << 24) + 1]
+        );
+        assert_eq!(report.time_regressions, 1);
+        assert_eq!(report.first_time_regression_index, Some(2));
+    }
+
+    #[test]
+    fn unknown_types_are_skipped_and_vectors_past_the_sensor_dropped() {
+        let (events, report) = decode(&[0x1234, 0x9000, 0x3006, 0x4fff], SensorSize::new(8, 8));
+        assert_eq!(events.len(), 2);
+        assert_eq!(report.skipped_words, 2);
+        assert_eq!(report.first_skipped_word_offset, Some(0));
+        assert_eq!(report.dropped_out_of_sensor, 10);
+        assert_eq!(report.first_out_of_sensor_offset, Some(6));
+    }
+}
