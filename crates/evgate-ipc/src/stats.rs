@@ -12,8 +12,8 @@ pub const NOT_MEASURED: i64 = i64::MIN;
 /// Accounting identity, always true at publication:
 /// `input_events = kept_events + suppressed_events + unjudged_passed_events + unjudged_dropped_events + dropped_events`.
 ///
-/// `input_events` counts the events the ingest published (known from each batch's
-/// `first_event_index + event_count`), `dropped_events` those the gate never received
+/// `input_events` counts the events the ingest published from `joined_at_event_index` on (known
+/// from each batch's `first_event_index + event_count`), `dropped_events` those the gate never received
 /// (discarded by back-pressure, seen as holes in `first_event_index`). Unjudged events had no
 /// usable forecast; the policy passed them (published on the kept stream) or dropped them
 /// (published on the suppressed stream).
@@ -39,6 +39,10 @@ pub struct PipelineStats {
     pub published_at_monotonic_us: u64,
     /// `stream_id` of the input stream counted.
     pub stream_id: u64,
+    /// Index of the first event of the stream this gate counts: 0 when it was listening before
+    /// the stream began, else the first event of the first batch it received (a gate started
+    /// mid-stream does not count what was published before it).
+    pub joined_at_event_index: u64,
     pub input_events: u64,
     pub kept_events: u64,
     pub suppressed_events: u64,
@@ -57,22 +61,35 @@ pub struct PipelineStats {
     /// Output samples (kept, suppressed, keep-bitmap) that some subscriber did not get because its
     /// buffer was full under the drop-and-count policy.
     pub output_samples_undelivered: u64,
-    /// Time of the last input event seen, microseconds.
+    /// Time of the last input event gated, microseconds.
     pub latest_event_time_us: i64,
     /// Model runtime of the latest forecast, microseconds ([`NOT_MEASURED`] before the first).
+    #[serde(serialize_with = "measured_or_null")]
     pub latest_model_runtime_us: i64,
     /// Age of the forecast that judged the latest batch: batch end time − forecast reference
     /// time, microseconds ([`NOT_MEASURED`] when the latest batch had no forecast).
+    #[serde(serialize_with = "measured_or_null")]
     pub latest_prediction_age_us: i64,
     /// Input batch published → its outputs published, nanoseconds.
+    #[serde(serialize_with = "measured_or_null")]
     pub latest_gate_latency_ns: i64,
     /// Time the gating kernel took on the latest batch, nanoseconds.
+    #[serde(serialize_with = "measured_or_null")]
     pub latest_kernel_ns: i64,
     /// 1 once the end-of-stream batch has been gated.
     pub end_of_stream: u32,
     /// Keeps the record free of implicit padding; always zero.
     #[serde(skip)]
     pub reserved: u32,
+}
+
+/// Writes [`NOT_MEASURED`] as JSON `null`.
+fn measured_or_null<S: serde::Serializer>(value: &i64, serializer: S) -> Result<S::Ok, S::Error> {
+    if *value == NOT_MEASURED {
+        serializer.serialize_none()
+    } else {
+        serializer.serialize_i64(*value)
+    }
 }
 
 impl PipelineStats {

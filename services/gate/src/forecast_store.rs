@@ -1,0 +1,80 @@
+//! The newest valid forecast, copied out of shared memory so the sample is returned at once.
+
+use evgate_core::{words_for, ForecastView, GateError, MaskError, MaskView, SensorSize};
+use evgate_ipc::{ForecastError, ForecastHeader};
+
+/// Why a received forecast was ignored.
+#[derive(Debug, thiserror::Error)]
+pub enum RejectedForecast {
+    #[error("forecast {sequence}: {source}")]
+    Header {
+        sequence: u64,
+        source: ForecastError,
+    },
+    #[error("forecast {sequence}: {source}")]
+    Masks { sequence: u64, source: GateError },
+    #[error("forecast {sequence}, current mask: {source}")]
+    CurrentMask { sequence: u64, source: MaskError },
+}
+
+/// A validated forecast: the current mask and one mask per horizon.
+pub struct StoredForecast {
+    pub header: ForecastHeader,
+    words: Vec<u64>,
+}
+
+impl StoredForecast {
+    /// Validates a received forecast and copies it.
+    pub fn copy_from(header: &ForecastHeader, payload: &[u64]) -> Result<Self, RejectedForecast> {
+        let sensor = SensorSize::new(header.width, header.height);
+        header
+            .validate(words_for(sensor), payload.len())
+            .map_err(|source| RejectedForecast::Header {
+                sequence: header.sequence,
+                source,
+            })?;
+        let stored = Self {
+            header: *header,
+            words: payload.to_vec(),
+        };
+        stored.view().map_err(|source| RejectedForecast::Masks {
+            sequence: header.sequence,
+            source,
+        })?;
+        MaskView::new(sensor, header.mask_words(&stored.words, 0)).map_err(|source| {
+            RejectedForecast::CurrentMask {
+                sequence: header.sequence,
+                source,
+            }
+        })?;
+        Ok(stored)
+    }
+
+    pub fn sensor(&self) -> SensorSize {
+        SensorSize::new(self.header.width, self.header.height)
+    }
+
+    /// The horizon masks as evgate-core's gating kernel reads them.
+    pub fn view(&self) -> Result<ForecastView<'_>, GateError> {
+        let per_mask = self.header.words_per_mask as usize;
+        ForecastView::new(
+            self.header.reference_time_us,
+            self.header.horizons(),
+            self.sensor(),
+            &self.words[per_mask..],
+        )
+    }
+
+    /// The mask at the reference time.
+    pub fn current_mask(&self) -> MaskView<'_> {
+        MaskView::new(self.sensor(), self.header.mask_words(&self.words, 0))
+            .expect("validated when stored")
+    }
+
+    /// The mask of the farthest horizon.
+    pub fn last_mask(&self) -> MaskView<'_> {
+        let last = self.header.mask_count() - 1;
+        MaskView::new(self.sensor(), self.header.mask_words(&self.words, last))
+            .expect("validated when stored")
+    }
+}
