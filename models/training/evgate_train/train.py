@@ -62,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--data", type=Path, required=True, help="directory searched recursively for training .npz sequences")
     parser.add_argument("--manifest", type=Path, required=True, help="the suite's manifest, hashed into the model")
     parser.add_argument("--run-dir", type=Path, required=True, help="checkpoint, logs and config go here")
+    parser.add_argument("--presets", default="", help="comma-separated presets to train on (default: all)")
     parser.add_argument("--size", default="S", help="model size: XS, S, M or L")
     parser.add_argument(
         "--time-conditioning", default="position-aware", help="ATC variant: position-aware, reference or none"
@@ -88,6 +89,12 @@ def build_parser() -> argparse.ArgumentParser:
         "(OpenMP workers spin on busy cores)",
     )
     parser.add_argument("--checkpoint-every", type=int, default=50, help="steps between checkpoints")
+    parser.add_argument(
+        "--keep-checkpoints-at",
+        default="",
+        help="comma-separated steps whose checkpoints are also kept as checkpoint-step<N>.pt "
+        "(equal-step ablations against a longer run with the same schedule)",
+    )
     parser.add_argument("--resume", action="store_true", help="continue from run-dir/checkpoint.pt")
     return parser
 
@@ -116,6 +123,11 @@ def train(args: argparse.Namespace) -> Path:
         network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
     log.info("loading %d sequences from %s", len(paths), args.data)
     sequences = [load_sequence(p) for p in tqdm(paths, desc="loading", unit="seq")]
+    keep = {p for p in args.presets.split(",") if p}
+    if keep:
+        sequences = [s for s in sequences if s.preset in keep]
+        if not sequences:
+            raise TrainingSetupError(f"{args.data}: no sequence of the presets {sorted(keep)}")
     # Resumed runs reseed by step so the data stream continues instead of repeating.
     seed_everything(args.seed + start_step)
     sampler = ChunkSampler(
@@ -138,6 +150,7 @@ def train(args: argparse.Namespace) -> Path:
             indent=2,
         )
     )
+    keep_steps = {int(v) for v in args.keep_checkpoints_at.split(",") if v}
     network.train()
     started = time.monotonic()
     with open(args.run_dir / "log.jsonl", "a") as log_file, tqdm(
@@ -169,8 +182,12 @@ def train(args: argparse.Namespace) -> Path:
             log_file.flush()
             progress.update(1)
             progress.set_postfix(loss=record["total"], mask=record["mask"], future=record["future_mask"])
-            if (step + 1) % args.checkpoint_every == 0 or step + 1 == args.steps:
+            if (step + 1) % args.checkpoint_every == 0 or step + 1 == args.steps or step + 1 in keep_steps:
                 save_checkpoint(checkpoint_path, network, optimiser, step + 1, digest, train_config)
+            if step + 1 in keep_steps:
+                save_checkpoint(
+                    args.run_dir / f"checkpoint-step{step + 1}.pt", network, optimiser, step + 1, digest, train_config
+                )
     log.info("finished %d steps in %.0f s; checkpoint %s", args.steps, time.monotonic() - started, checkpoint_path)
     return checkpoint_path
 

@@ -22,8 +22,9 @@ def _args(synthetic_dir, run_dir, steps, *extra):
 
 def test_training_logs_checkpoints_and_resumes(synthetic_dir, tmp_path):
     run = tmp_path / "run"
-    train(_args(synthetic_dir, run, 2))
+    train(_args(synthetic_dir, run, 2, "--keep-checkpoints-at", "1"))
     assert load_checkpoint(run / "checkpoint.pt").step == 2
+    assert load_checkpoint(run / "checkpoint-step1.pt").step == 1
     train(_args(synthetic_dir, run, 3, "--resume"))
     records = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
     assert [r["step"] for r in records] == [1, 2, 3]
@@ -63,3 +64,16 @@ def test_flips_move_masks_flow_and_events_alike(synthetic_dir):
     # (events fire only on the square) is unchanged by the flip.
     assert _object_event_share(flipped) == pytest.approx(_object_event_share(window))
     assert flipped.future_events[0].on.tolist() == (~window.future_events[0].on).tolist()
+
+
+def test_object_crops_contain_an_object(synthetic_dir):
+    from evgate_train.batches import ChunkSampler
+
+    sequence = load_sequence(synthetic_dir / "slide-0.npz")
+    sampler = ChunkSampler([sequence], 2, 32, 100, augment=False, seed=3, object_crop_share=1.0)
+    for _ in range(20):
+        start = int(sampler.rng.integers(len(sequence.ref_ts) - 1))
+        crop = sampler._crop(sequence, start)
+        frame = sequence.masks[sequence.grid_index(int(sequence.ref_ts[start]))]
+        assert 0 <= crop.left <= sequence.width - 32 and 0 <= crop.top <= sequence.height - 32
+        assert frame[crop.top : crop.top + 32, crop.left : crop.left + 32].any()
