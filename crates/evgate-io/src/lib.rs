@@ -8,23 +8,28 @@
 
 pub mod aedat4;
 pub mod csv;
+pub mod csv_writer;
 pub mod dat;
 pub mod error;
 pub mod evt2;
 pub mod evt3;
+pub mod evt3_writer;
 pub mod flatbuffer;
 pub mod format;
 pub mod header;
 pub mod native;
+pub mod native_writer;
 pub mod npy;
 pub mod npz;
 pub mod reader;
 pub mod report;
 pub mod sequence;
 pub mod source;
+pub mod writer;
 
 pub use error::DecodeError;
 pub use format::{detect, Format};
 pub use reader::{open, open_with, read_all, EventReader, OpenOptions};
 pub use report::DecodeReport;
 pub use sequence::{LabelledSequence, SequenceError};
+pub use writer::{create, create_as, EncodeError, EventWriter};
