@@ -4,6 +4,7 @@
 
 pub mod contract;
 pub mod environment;
+pub mod identity;
 pub mod library;
 pub mod metadata;
 pub mod options;

@@ -100,7 +100,9 @@ pub struct ModelMetadata {
     pub input_width: u16,
     pub max_horizon_ms: f32,
     pub atc: AtcVariant,
-    pub train_manifest_sha256: String,
+    /// Hash of the training suite's manifest; `None` for an export of untrained weights (the
+    /// exporter writes `untrained`), which only runtime tests use.
+    pub train_manifest_sha256: Option<String>,
     pub train_steps: u64,
 }
 
@@ -226,15 +228,20 @@ fn parse_atc(value: &str) -> Result<AtcVariant, MetadataError> {
     }
 }
 
-fn parse_sha256(value: &str) -> Result<String, MetadataError> {
+/// Written instead of a manifest hash for freshly initialised weights.
+pub const UNTRAINED_MANIFEST: &str = "untrained";
+
+fn parse_sha256(value: &str) -> Result<Option<String>, MetadataError> {
     let trimmed = value.trim();
-    if trimmed.len() == 64 && trimmed.bytes().all(|b| b.is_ascii_hexdigit()) {
-        Ok(trimmed.to_ascii_lowercase())
+    if trimmed == UNTRAINED_MANIFEST {
+        Ok(None)
+    } else if trimmed.len() == 64 && trimmed.bytes().all(|b| b.is_ascii_hexdigit()) {
+        Ok(Some(trimmed.to_ascii_lowercase()))
     } else {
         Err(invalid(
             KEY_TRAIN_MANIFEST_SHA256,
             value,
-            "64 hexadecimal digits",
+            format!("64 hexadecimal digits or `{UNTRAINED_MANIFEST}`"),
         ))
     }
 }
@@ -276,6 +283,14 @@ mod tests {
         assert_eq!(metadata.state_shape(0), [1, 16, 136, 176]);
         assert_eq!(metadata.state_shape(3), [1, 128, 17, 22]);
         assert_eq!(metadata.atc, AtcVariant::PositionAware);
+        assert_eq!(metadata.train_manifest_sha256, Some("ab".repeat(32)));
+    }
+
+    #[test]
+    fn untrained_exports_have_no_manifest() {
+        let mut map = valid();
+        map.insert(KEY_TRAIN_MANIFEST_SHA256, UNTRAINED_MANIFEST.to_owned());
+        assert_eq!(parse(&map).unwrap().train_manifest_sha256, None);
     }
 
     #[test]

@@ -15,6 +15,7 @@ use crate::contract::{
     OUTPUT_FUTURE_MASK, OUTPUT_MASK, OUTPUT_STATES,
 };
 use crate::environment::{shared_environment, EnvironmentError};
+use crate::identity;
 use crate::library::{locate_onnxruntime, LibraryError};
 use crate::metadata::{MetadataError, ModelMetadata};
 use crate::options::{ActiveProvider, Provider, RuntimeOptions};
@@ -33,6 +34,11 @@ pub enum ModelError {
         path.display()
     )]
     ModelMissing { path: PathBuf },
+    #[error("cannot read model file {}: {source}", path.display())]
+    ModelUnreadable {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("cannot configure the onnx runtime session for {}: {source}", path.display())]
     Configure { path: PathBuf, source: ort::Error },
     #[error("onnx runtime cannot load the model {}: {source}", path.display())]
@@ -99,6 +105,7 @@ pub enum ModelError {
 pub struct ModelRuntime {
     session: Session,
     model_path: PathBuf,
+    model_id: u64,
     metadata: ModelMetadata,
     provider: ActiveProvider,
     state: RecurrentState,
@@ -112,6 +119,12 @@ impl ModelRuntime {
         if !path.is_file() {
             return Err(ModelError::ModelMissing { path });
         }
+        let model_id = std::fs::read(&path)
+            .map(|bytes| identity::model_id(&bytes))
+            .map_err(|source| ModelError::ModelUnreadable {
+                path: path.clone(),
+                source,
+            })?;
         let library = match &options.library {
             Some(library) => library.clone(),
             None => locate_onnxruntime()?,
@@ -153,6 +166,7 @@ impl ModelRuntime {
         })?;
         tracing::info!(
             model = %path.display(),
+            model_id = %format!("{model_id:016x}"),
             size = metadata.model_size.label(),
             input = %format!("{}x{}", metadata.input_width, metadata.input_height),
             %provider,
@@ -162,6 +176,7 @@ impl ModelRuntime {
         Ok(Self {
             session,
             model_path: path,
+            model_id,
             metadata,
             provider,
             state,
@@ -179,6 +194,11 @@ impl ModelRuntime {
 
     pub fn model_path(&self) -> &Path {
         &self.model_path
+    }
+
+    /// FNV-1a hash of the model file (the forecast header's `model_id`).
+    pub fn model_id(&self) -> u64 {
+        self.model_id
     }
 
     /// The execution provider in use after any fall-back.

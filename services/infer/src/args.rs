@@ -1,0 +1,64 @@
+//! The command line of `evgate-infer`.
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use evgate_model::Provider;
+use serde::Serialize;
+
+/// Runs the suppression network on the event stream of one pipeline and publishes forecast
+/// masks (the current mask and one per horizon) on `<domain>/<camera>/forecast`.
+#[derive(Debug, Clone, Parser, Serialize)]
+#[command(name = "evgate-infer", version, about)]
+#[serde(rename_all = "kebab-case")]
+pub struct InferArgs {
+    /// Exported network (docs/model-contract.md).
+    #[arg(long, default_value = "models/evgate-S.onnx")]
+    pub model: PathBuf,
+    /// Execution provider: cpu, cuda (falls back to cpu with a warning when CUDA cannot be
+    /// used) or auto (cuda when usable, else cpu).
+    #[arg(long, default_value = "cpu")]
+    pub provider: Provider,
+    /// Threads ONNX Runtime uses inside one operator (0: one per core).
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Keep ONNX Runtime's idle threads spinning between windows: lower latency, but they burn
+    /// the cores that ingest and gate share.
+    #[arg(long)]
+    pub spin_threads: bool,
+    /// CUDA device ordinal for the cuda and auto providers.
+    #[arg(long, default_value_t = 0)]
+    pub cuda_device: i32,
+    /// Pipeline domain: the first part of the service names `<domain>/<camera>/<stream>`.
+    #[arg(long, default_value = "evgate")]
+    pub domain: String,
+    /// Camera name: the second part of the service names.
+    #[arg(long, default_value = "cam0")]
+    pub camera: String,
+    /// Forecast horizons in milliseconds, comma-separated and ascending, at most
+    /// evgate_ipc::MAX_HORIZONS; default: that many evenly spaced up to the model's largest
+    /// horizon.
+    #[arg(long, value_delimiter = ',')]
+    pub horizons_ms: Vec<f32>,
+    /// Event time between two forecasts in milliseconds; default: the model's window length.
+    #[arg(long)]
+    pub stride_ms: Option<f64>,
+    /// Close a window every this many events instead of by event time.
+    #[arg(long, conflicts_with = "stride_ms")]
+    pub window_events: Option<usize>,
+    /// Logit above which a pixel is marked as independently moving (0 ⇔ probability 0.5).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub threshold_logit: f32,
+    /// Sleep between two polls of the event stream, microseconds.
+    #[arg(long, default_value_t = 1000)]
+    pub cycle_us: u64,
+    /// Seconds between two stats lines; 0 prints them only at exit.
+    #[arg(long, default_value_t = 5.0)]
+    pub stats_interval_s: f64,
+    /// Also write the stats as JSON to this file, at every stats line and at exit.
+    #[arg(long)]
+    pub stats_json: Option<PathBuf>,
+    /// Exit once the event stream has ended and the forecast of its last window is published.
+    #[arg(long)]
+    pub exit_at_end: bool,
+}

@@ -1,0 +1,242 @@
+//! The real `evgate-infer` binary over real shared memory: events in, forecasts out, clean
+//! exits. Uses the committed `models/evgate-S.onnx` (`EVGATE_TEST_MODEL` overrides the path);
+//! the synthetic stream is 346 × 260, the sensor that model is exported for.
+
+use std::path::PathBuf;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use evgate_core::{words_for, Event, SensorSize};
+use evgate_ipc::{
+    create_node, BatchFlags, BatchHeader, ForecastHeader, PipelineNames, Qos, SlicePublisher,
+    SliceSubscriber, Stream, MAX_HORIZONS,
+};
+
+const COMMITTED_MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/evgate-S.onnx");
+const SENSOR: SensorSize = SensorSize::new(346, 260);
+const BATCH_US: i64 = 10_000;
+
+fn model_path() -> PathBuf {
+    let path = std::env::var_os("EVGATE_TEST_MODEL")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(COMMITTED_MODEL));
+    assert!(
+        path.is_file(),
+        "these tests need the exported network {} (committed as models/evgate-S.onnx; \
+         EVGATE_TEST_MODEL overrides the path) and it is missing",
+        path.display()
+    );
+    path
+}
+
+fn infer_command(domain: &str) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_evgate-infer"));
+    command
+        .arg("--model")
+        .arg(model_path())
+        .args(["--domain", domain, "--camera", "cam", "--threads", "1"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    command
+}
+
+/// Waits for the child to exit, killing it after `limit`; `meanwhile` runs every 2 ms.
+fn wait_for_exit(mut child: Child, limit: Duration, mut meanwhile: impl FnMut()) -> Output {
+    let started = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        meanwhile();
+        if started.elapsed() > limit {
+            child.kill().unwrap();
+            let output = child.wait_with_output().unwrap();
+            panic!(
+                "evgate-infer did not exit within {limit:?}; stderr:\n{}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn wait_for_subscriber(publisher: &SlicePublisher<Event, BatchHeader>, child: &mut Child) {
+    let started = Instant::now();
+    while publisher.subscriber_count() == 0 {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("evgate-infer exited early with {status}");
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "evgate-infer never subscribed to the event stream"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A 20 × 20 block of events moving right 1 px per ms over a sparse background.
+fn batch_events(t_begin: i64) -> Vec<Event> {
+    let mut events = Vec::new();
+    for step in 0..BATCH_US / 1000 {
+        let t = t_begin + step * 1000;
+        let left = (t / 1000) as u16 % 300;
+        for dy in 0..20u16 {
+            for dx in [0u16, 19] {
+                events.push(Event::new(t, left + dx, 100 + dy, dx == 0));
+            }
+        }
+        events.push(Event::new(
+            t,
+            (t / 997 % 346) as u16,
+            (t / 389 % 260) as u16,
+            true,
+        ));
+    }
+    events
+}
+
+#[test]
+fn windows_become_forecasts_and_the_service_exits_at_the_end_of_the_stream() {
+    let domain = format!("infer-e2e-{}", std::process::id());
+    let names = PipelineNames::new(&domain, "cam").unwrap();
+    let node = create_node("infer-e2e-test").unwrap();
+    let publisher =
+        SlicePublisher::<Event, BatchHeader>::open(&node, &names, Stream::Events, &Qos::default())
+            .unwrap();
+    let forecasts = SliceSubscriber::<u64, ForecastHeader>::open(
+        &node,
+        &names,
+        Stream::Forecast,
+        &Qos::default(),
+    )
+    .unwrap();
+    let stats_file = tempfile::NamedTempFile::new().unwrap();
+    let mut child = infer_command(&domain)
+        .args(["--exit-at-end", "--stats-json"])
+        .arg(stats_file.path())
+        .spawn()
+        .unwrap();
+    wait_for_subscriber(&publisher, &mut child);
+
+    let batches = 30;
+    let mut received = Vec::new();
+    let mut first_event_index = 0;
+    for sequence in 0..batches {
+        let t_begin = sequence as i64 * BATCH_US;
+        let events = batch_events(t_begin);
+        let header = BatchHeader {
+            stream_id: 42,
+            sequence,
+            first_event_index,
+            event_count: events.len() as u64,
+            t_begin_us: t_begin,
+            t_end_us: t_begin + BATCH_US,
+            width: SENSOR.width,
+            height: SENSOR.height,
+            flags: if sequence == batches - 1 {
+                BatchFlags::END_OF_STREAM
+            } else {
+                0
+            },
+            ..Default::default()
+        };
+        first_event_index += events.len() as u64;
+        publisher.publish(header, &events).unwrap();
+        // Real time, so that the model keeps up on a loaded machine most of the time.
+        std::thread::sleep(Duration::from_millis(10));
+        while let Some(sample) = forecasts.receive().unwrap() {
+            received.push((*sample.user_header(), sample.payload().to_vec()));
+        }
+    }
+    // The forecasts vanish with their publisher, so keep reading until the service exits.
+    let output = wait_for_exit(child, Duration::from_secs(60), || {
+        while let Some(sample) = forecasts.receive().unwrap() {
+            received.push((*sample.user_header(), sample.payload().to_vec()));
+        }
+    });
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success(),
+        "exit {}; stderr:\n{stderr}",
+        output.status
+    );
+
+    // Windows end at 50, 100, … 250 ms: the 300 ms one never closes because the stream ends
+    // at 300 ms exclusive.
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(report["windows-closed"], 5, "{report}");
+    let published = report["forecasts-published"].as_u64().unwrap();
+    let skipped = report["windows-skipped-busy"].as_u64().unwrap();
+    assert_eq!(published + skipped, 5, "{report}");
+    assert_eq!(report["events-received"], first_event_index, "{report}");
+    assert_eq!(report["gaps-detected"], 0, "{report}");
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(stats_file.path()).unwrap()).unwrap();
+    assert_eq!(written["forecasts-published"], published);
+
+    // Only the last forecast can be published so close to the exit that it is gone before it
+    // is read.
+    assert!(
+        !received.is_empty() && received.len() as u64 + 1 >= published,
+        "received {} of {published} forecasts; stderr:\n{stderr}",
+        received.len()
+    );
+    let words = words_for(SENSOR);
+    for (index, (header, payload)) in received.iter().enumerate() {
+        header.validate(words, payload.len()).unwrap();
+        assert_eq!(header.sequence, index as u64);
+        assert_eq!(header.source_stream_id, 42);
+        assert_eq!(header.horizon_count as usize, MAX_HORIZONS);
+        assert_eq!(*header.horizons().last().unwrap(), 100_000);
+        assert_eq!(header.reference_time_us % 50_000, 0);
+        assert_eq!(header.window_start_us, header.reference_time_us - 50_000);
+        assert!(header.model_runtime_us > 0);
+        assert_eq!((header.width, header.height), (SENSOR.width, SENSOR.height));
+    }
+}
+
+#[test]
+fn sigint_stops_the_service_cleanly_with_its_stats() {
+    let domain = format!("infer-sigint-{}", std::process::id());
+    let names = PipelineNames::new(&domain, "cam").unwrap();
+    let node = create_node("infer-sigint-test").unwrap();
+    let publisher =
+        SlicePublisher::<Event, BatchHeader>::open(&node, &names, Stream::Events, &Qos::default())
+            .unwrap();
+    let mut child = infer_command(&domain).spawn().unwrap();
+    wait_for_subscriber(&publisher, &mut child);
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let output = wait_for_exit(child, Duration::from_secs(30), || {});
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success(),
+        "exit {}; stderr:\n{stderr}",
+        output.status
+    );
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(report["windows-closed"], 0, "{report}");
+    assert_eq!(report["model-size"], "S", "{report}");
+}
+
+#[test]
+fn bad_settings_fail_with_the_value_at_fault() {
+    let missing = std::env::temp_dir().join("evgate-infer-no-such-model.onnx");
+    let output = Command::new(env!("CARGO_BIN_EXE_evgate-infer"))
+        .arg("--model")
+        .arg(&missing)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains(&missing.display().to_string()), "{stderr}");
+
+    let output = infer_command("infer-bad-horizons")
+        .args(["--horizons-ms", "10,500"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("#1 = 500"), "{stderr}");
+}
