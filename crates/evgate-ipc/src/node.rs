@@ -1,7 +1,7 @@
 //! Creating the iceoryx2 node of a process.
 
 use iceoryx2::prelude::{Node, NodeBuilder, NodeName};
-use tracing::{info, warn};
+use tracing::{debug, info};
 
 use crate::Service;
 
@@ -37,7 +37,8 @@ pub fn create_node(name: &str) -> Result<Node<Service>, NodeError> {
         );
     }
     if cleanup.failed_cleanups > 0 {
-        warn!(
+        // Typically nodes of other users or ones another process is cleaning right now.
+        debug!(
             failed = cleanup.failed_cleanups,
             "could not remove resources of some dead iceoryx2 nodes"
         );

@@ -1,6 +1,8 @@
 //! `evgate`: the umbrella command line. Each subcommand lives in its own module; this file only
 //! parses the command line, sets up logging and dispatches.
 
+mod run;
+
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
@@ -13,7 +15,10 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Run the pipeline (ingest → infer → gate) with a live status line and a final summary.
+    Run(run::RunArgs),
+}
 
 fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
@@ -21,5 +26,7 @@ fn main() -> anyhow::Result<()> {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Run(args) => run::run(args),
+    }
 }

@@ -1,0 +1,451 @@
+//! `evgate run`: starts ingest (the built-in simulated camera or a recording), inference and
+//! gate as child processes on a private domain, shows a live status line from the gate's stats
+//! and ends with a summary, including per-event precision, recall and F1 against the labels
+//! when the source has them.
+
+mod children;
+mod scoring;
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use evgate_ipc::{
+    create_node, BatchHeader, LatestSubscriber, PipelineNames, PipelineStats, Qos, SliceSubscriber,
+    Stream,
+};
+use iceoryx2::prelude::{CallbackProgression, WaitSetAttachmentId, WaitSetBuilder};
+use iceoryx2::waitset::WaitSetRunResult;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use tracing::{info, warn};
+
+use children::{binary_directory, Service};
+use scoring::{Scorer, Scores, Wanted};
+
+/// Which events the pipeline keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RunMode {
+    /// Keep the events of independently moving objects.
+    KeepMovingObjects,
+    /// Keep the ego-motion events.
+    KeepEgoMotion,
+}
+
+impl RunMode {
+    fn flag(self) -> &'static str {
+        match self {
+            RunMode::KeepMovingObjects => "keep-moving-objects",
+            RunMode::KeepEgoMotion => "keep-ego-motion",
+        }
+    }
+}
+
+/// Arguments of `evgate run`.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// Recording to replay (a labelled-sequence .npz); without it, the built-in simulated camera.
+    #[arg(long)]
+    input: Option<PathBuf>,
+    /// Scene of the simulated camera: boxes, floor, wall, table, fast, tabletop or driving.
+    #[arg(long, default_value = "boxes")]
+    preset: String,
+    /// Seed of the simulated scene.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Seconds of events: simulated time for the simulated camera; for a recording, the run
+    /// stops after this much wall-clock time (the whole file when not given).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Exported network the inference runs.
+    #[arg(long, default_value = "models/evgate-S.onnx")]
+    model: PathBuf,
+    /// Run without the inference service: every event then follows --no-forecast.
+    #[arg(long)]
+    no_infer: bool,
+    /// Which events pass.
+    #[arg(long, value_enum, default_value = "keep-moving-objects")]
+    mode: RunMode,
+    /// Fate of events no valid forecast judges: pass, drop or last-mask.
+    #[arg(long, default_value = "pass")]
+    no_forecast: String,
+    /// Publish events as fast as possible instead of at the pace of their timestamps.
+    #[arg(long)]
+    fast: bool,
+    /// Batch span in milliseconds.
+    #[arg(long, default_value_t = 1.0)]
+    batch_ms: f64,
+    /// Pipeline domain; default: a fresh one per run, so runs never share services.
+    #[arg(long)]
+    domain: Option<String>,
+    /// Camera name within the domain.
+    #[arg(long, default_value = "cam0")]
+    camera: String,
+    /// Refresh period of the status line, milliseconds.
+    #[arg(long, default_value_t = 250)]
+    status_interval_ms: u64,
+    /// Print the summary as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Rates between two status updates.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct Rates {
+    events_in_per_s: f64,
+    events_out_per_s: f64,
+}
+
+/// What `evgate run` prints at the end.
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct RunSummary {
+    domain: String,
+    source: String,
+    /// `end-of-stream`, `duration`, `signal` or `service-failed`.
+    ended_by: &'static str,
+    wall_s: f64,
+    mean_rates: Rates,
+    kept_ratio: Option<f64>,
+    /// The gate's final counters (null when it never published).
+    stats: Option<PipelineStats>,
+    balanced: Option<bool>,
+    /// Per-event scores of the kept events against the labels (null without labels).
+    /// Positive class: the events the mode keeps (label > 0 for keep-moving-objects).
+    scores: Option<Scores>,
+    /// The JSON summaries the services printed at exit.
+    services: serde_json::Map<String, serde_json::Value>,
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    if let Some(duration) = args.duration {
+        if !(duration > 0.0 && duration.is_finite()) {
+            bail!("--duration = {duration} must be a positive number of seconds");
+        }
+    }
+    if !args.no_infer && !args.model.is_file() {
+        bail!(
+            "model {} not found: export one (models/training) or pass --model, or run with --no-infer",
+            args.model.display()
+        );
+    }
+    let domain = args
+        .domain
+        .clone()
+        .unwrap_or_else(|| format!("evgate-run-{}", std::process::id()));
+    let names = PipelineNames::new(&domain, &args.camera)?;
+    let node = create_node("evgate-run")?;
+    // Subscribe before any service starts so no batch is missed.
+    let reader_qos = Qos::default();
+    let labels =
+        SliceSubscriber::<u16, BatchHeader>::open(&node, &names, Stream::Labels, &reader_qos)?;
+    let bitmaps =
+        SliceSubscriber::<u64, BatchHeader>::open(&node, &names, Stream::KeepBitmap, &reader_qos)?;
+    let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats)?;
+
+    let directory = binary_directory()?;
+    let common = vec![
+        "--domain".to_owned(),
+        domain.clone(),
+        "--camera".to_owned(),
+        args.camera.clone(),
+    ];
+    let mut gate_args = common.clone();
+    gate_args.extend([
+        "--mode".to_owned(),
+        args.mode.flag().to_owned(),
+        "--no-forecast".to_owned(),
+        args.no_forecast.clone(),
+        "--outputs".to_owned(),
+        "kept,suppressed,keep-bitmap".to_owned(),
+        // The scores need every bitmap; this reader keeps up, so blocking costs nothing.
+        "--overflow".to_owned(),
+        "block".to_owned(),
+        "--exit-at-end-of-stream".to_owned(),
+        "--json".to_owned(),
+    ]);
+    let mut services = vec![Service::start(&directory, "evgate-gate", &gate_args)?];
+    if !args.no_infer {
+        let mut infer_args = common.clone();
+        infer_args.extend([
+            "--model".to_owned(),
+            args.model.display().to_string(),
+            "--exit-at-end".to_owned(),
+        ]);
+        services.push(Service::start(&directory, "evgate-infer", &infer_args)?);
+    }
+    let mut ingest_args = common;
+    ingest_args.extend([
+        "--wait-for-subscribers".to_owned(),
+        services.len().to_string(),
+        "--batch-ms".to_owned(),
+        args.batch_ms.to_string(),
+        "--json".to_owned(),
+    ]);
+    let source = match &args.input {
+        Some(path) => {
+            ingest_args.extend(["--input".to_owned(), path.display().to_string()]);
+            path.display().to_string()
+        }
+        None => {
+            ingest_args.extend([
+                "--preset".to_owned(),
+                args.preset.clone(),
+                "--seed".to_owned(),
+                args.seed.to_string(),
+                "--sim-duration-s".to_owned(),
+                args.duration.unwrap_or(10.0).to_string(),
+            ]);
+            format!(
+                "simulated camera, preset {} seed {}",
+                args.preset, args.seed
+            )
+        }
+    };
+    if args.fast {
+        ingest_args.push("--fast".to_owned());
+    }
+    services.push(Service::start(&directory, "evgate-ingest", &ingest_args)?);
+    info!(%domain, %source, "pipeline started");
+
+    let waitset = WaitSetBuilder::new()
+        .create::<evgate_ipc::Service>()
+        .context("cannot create the iceoryx2 waitset")?;
+    let labels_guard = waitset
+        .attach_notification(labels.listener())
+        .context("cannot attach the labels listener")?;
+    let bitmaps_guard = waitset
+        .attach_notification(bitmaps.listener())
+        .context("cannot attach the keep-bitmap listener")?;
+    let status_tick = waitset
+        .attach_interval(Duration::from_millis(args.status_interval_ms.max(1)))
+        .context("cannot attach the status interval")?;
+
+    let wanted = match args.mode {
+        RunMode::KeepMovingObjects => Wanted::MovingObjects,
+        RunMode::KeepEgoMotion => Wanted::EgoMotion,
+    };
+    let mut scorer = Scorer::new(wanted);
+    let mut saw_labels = false;
+    let mut end_of_stream = false;
+    let mut latest_stats: Option<PipelineStats> = None;
+    let mut previous: Option<(Instant, PipelineStats)> = None;
+    let mut ended_by = "end-of-stream";
+    let mut failure: Option<anyhow::Error> = None;
+    let started = Instant::now();
+    let wall_limit = args
+        .input
+        .as_ref()
+        .and(args.duration)
+        .map(Duration::from_secs_f64);
+    let status = ProgressBar::new_spinner();
+    status.set_style(
+        ProgressStyle::with_template("{spinner} {elapsed} {msg}")
+            .context("status line template")?,
+    );
+
+    let outcome = waitset
+        .wait_and_process(|attachment: WaitSetAttachmentId<evgate_ipc::Service>| {
+            let step = (|| -> anyhow::Result<bool> {
+                if attachment.has_event_from(&labels_guard) {
+                    labels.clear_wakeups();
+                    while let Some(sample) = labels.receive()? {
+                        let header = sample.user_header();
+                        saw_labels = true;
+                        scorer.add_labels(header.stream_id, header.sequence, sample.payload());
+                    }
+                }
+                if attachment.has_event_from(&bitmaps_guard) {
+                    bitmaps.clear_wakeups();
+                    while let Some(sample) = bitmaps.receive()? {
+                        let header = sample.user_header();
+                        scorer.add_bitmap(header.stream_id, header.sequence, sample.payload());
+                        end_of_stream |= header.is_end_of_stream();
+                    }
+                }
+                if attachment.has_event_from(&status_tick) {
+                    if let Some(fresh) = stats.latest()? {
+                        latest_stats = Some(fresh);
+                    }
+                    if let Some(current) = latest_stats {
+                        status.set_message(status_line(previous.as_ref(), &current));
+                        previous = Some((Instant::now(), current));
+                    }
+                    status.tick();
+                    for service in services.iter_mut() {
+                        if service.has_exited()? && !service.status.is_some_and(|s| s.success()) {
+                            bail!(
+                                "{} (pid {}) failed: {:?}",
+                                service.binary,
+                                service.pid(),
+                                service.status
+                            );
+                        }
+                    }
+                    if wall_limit.is_some_and(|limit| started.elapsed() >= limit) {
+                        ended_by = "duration";
+                        return Ok(true);
+                    }
+                }
+                Ok(end_of_stream)
+            })();
+            match step {
+                Ok(true) => CallbackProgression::Stop,
+                Ok(false) => CallbackProgression::Continue,
+                Err(error) => {
+                    failure = Some(error);
+                    CallbackProgression::Stop
+                }
+            }
+        })
+        .context("waiting on the iceoryx2 waitset failed")?;
+    status.finish_and_clear();
+    if matches!(
+        outcome,
+        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
+    ) {
+        ended_by = "signal";
+    }
+    if failure.is_some() {
+        ended_by = "service-failed";
+    }
+    let wall_s = started.elapsed().as_secs_f64();
+
+    // At the end of the stream the services exit by themselves; otherwise they are asked to.
+    let grace = Duration::from_secs(10);
+    if ended_by != "end-of-stream" {
+        for service in services.iter_mut() {
+            service.request_stop()?;
+        }
+    }
+    let mut summaries = serde_json::Map::new();
+    for service in services.iter_mut() {
+        let output = service.finish(grace)?;
+        match serde_json::from_str::<serde_json::Value>(&output) {
+            Ok(value) => {
+                summaries.insert(service.binary.to_owned(), value);
+            }
+            Err(_) if output.trim().is_empty() => {}
+            Err(error) => warn!(service = service.binary, %error, "summary is not JSON"),
+        }
+    }
+    if let Some(fresh) = stats.latest()? {
+        latest_stats = Some(fresh);
+    }
+    // Bitmaps published after the end-of-stream stop (none, normally) still count.
+    while let Some(sample) = labels.receive()? {
+        let header = sample.user_header();
+        scorer.add_labels(header.stream_id, header.sequence, sample.payload());
+    }
+    while let Some(sample) = bitmaps.receive()? {
+        let header = sample.user_header();
+        scorer.add_bitmap(header.stream_id, header.sequence, sample.payload());
+    }
+
+    let summary = RunSummary {
+        domain,
+        source,
+        ended_by,
+        wall_s,
+        mean_rates: latest_stats
+            .map(|s| Rates {
+                events_in_per_s: s.input_events as f64 / wall_s,
+                events_out_per_s: s.passed_events() as f64 / wall_s,
+            })
+            .unwrap_or_default(),
+        kept_ratio: latest_stats
+            .filter(|s| s.input_events > 0)
+            .map(|s| s.passed_events() as f64 / s.input_events as f64),
+        balanced: latest_stats.map(|s| s.is_balanced()),
+        stats: latest_stats,
+        scores: saw_labels.then(|| scorer.scores()),
+        services: summaries,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print_summary(&summary);
+    }
+    if let Some(error) = failure {
+        return Err(error);
+    }
+    Ok(())
+}
+
+fn status_line(previous: Option<&(Instant, PipelineStats)>, current: &PipelineStats) -> String {
+    let rates = previous
+        .map(|(at, before)| {
+            let seconds = at.elapsed().as_secs_f64().max(1e-6);
+            Rates {
+                events_in_per_s: (current.input_events
+                    - before.input_events.min(current.input_events))
+                    as f64
+                    / seconds,
+                events_out_per_s: (current.passed_events()
+                    - before.passed_events().min(current.passed_events()))
+                    as f64
+                    / seconds,
+            }
+        })
+        .unwrap_or_default();
+    let kept = if current.input_events > 0 {
+        100.0 * current.passed_events() as f64 / current.input_events as f64
+    } else {
+        0.0
+    };
+    let measured = |value: i64, scale: f64, unit: &str| {
+        if value == evgate_ipc::stats::NOT_MEASURED {
+            "n/a".to_owned()
+        } else {
+            format!("{:.1} {unit}", value as f64 / scale)
+        }
+    };
+    format!(
+        "in {:.2} Mev/s  out {:.2} Mev/s  kept {kept:.1}%  inference {}  prediction age {}  dropped {}",
+        rates.events_in_per_s / 1e6,
+        rates.events_out_per_s / 1e6,
+        measured(current.latest_model_runtime_us, 1e3, "ms"),
+        measured(current.latest_prediction_age_us, 1e3, "ms"),
+        current.dropped_events,
+    )
+}
+
+fn print_summary(summary: &RunSummary) {
+    println!(
+        "evgate run on {} ({}), ended by {} after {:.1} s",
+        summary.source, summary.domain, summary.ended_by, summary.wall_s
+    );
+    if let Some(stats) = &summary.stats {
+        println!(
+            "events: {} in, {} kept, {} suppressed, {} unjudged passed, {} unjudged dropped, {} lost; balanced: {}",
+            stats.input_events,
+            stats.kept_events,
+            stats.suppressed_events,
+            stats.unjudged_passed_events,
+            stats.unjudged_dropped_events,
+            stats.dropped_events,
+            stats.is_balanced()
+        );
+        println!(
+            "forecasts: {} received, {} used, {} rejected",
+            stats.forecasts_received, stats.forecasts_used, stats.forecasts_rejected
+        );
+    }
+    println!(
+        "mean rates: {:.3} Mev/s in, {:.3} Mev/s out",
+        summary.mean_rates.events_in_per_s / 1e6,
+        summary.mean_rates.events_out_per_s / 1e6
+    );
+    if let Some(scores) = &summary.scores {
+        let show = |value: Option<f64>| value.map_or("n/a".to_owned(), |v| format!("{v:.3}"));
+        println!(
+            "per-event scores over {} events: precision {}, recall {}, F1 {}, suppressed {}",
+            scores.events_scored,
+            show(scores.precision),
+            show(scores.recall),
+            show(scores.f1),
+            show(scores.suppressed_ratio)
+        );
+    }
+}
