@@ -87,12 +87,14 @@ impl PropheseeHeader {
     }
 }
 
-fn parse_geometry(text: &str) -> Option<SensorSize> {
+/// Parses the `WxH` notation (`640x480`) used by `% geometry` and the command line.
+pub fn parse_geometry(text: &str) -> Option<SensorSize> {
     let (width, height) = text.split_once('x')?;
     Some(SensorSize::new(
         width.trim().parse().ok()?,
         height.trim().parse().ok()?,
     ))
+    .filter(|size| size.width > 0 && size.height > 0)
 }
 
 /// Sensor sizes of the Prophesee camera plugins whose recordings carry no geometry line
