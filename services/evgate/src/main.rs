@@ -1,7 +1,8 @@
 //! `evgate`: the umbrella command line. Each subcommand lives in its own module; this file only
 //! parses the command line, sets up logging and dispatches.
 
-mod run;
+mod convert;
+mod info;
 
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
@@ -16,8 +17,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run the pipeline (ingest → infer → gate) with a live status line and a final summary.
-    Run(run::RunArgs),
+    /// Describe an event file: format, sensor, event count, times, rate, polarity, repairs.
+    Info(info::InfoArgs),
+    /// Convert an event file; the output format follows the extension (.csv, .raw EVT 3.0, .evg).
+    Convert(convert::ConvertArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -27,6 +30,7 @@ fn main() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Run(args) => run::run(args),
+        Command::Info(args) => info::run(args),
+        Command::Convert(args) => convert::run(args),
     }
 }
