@@ -31,7 +31,14 @@ impl<'a> SequenceView<'a> {
                 |n| n.to_string_lossy().into_owned(),
             )
         });
-        let name = path.file_stem().map_or_else(
+        // A suite stores each sequence as `<preset>-<seed>/sequence.npz`: the folder names it.
+        let named_by_folder = path.file_stem().is_some_and(|s| s == "sequence");
+        let name_source = if named_by_folder {
+            path.parent().and_then(Path::file_name)
+        } else {
+            path.file_stem()
+        };
+        let name = name_source.map_or_else(
             || path.display().to_string(),
             |s| s.to_string_lossy().into_owned(),
         );
@@ -118,4 +125,49 @@ fn centroids(mask: &[u8], width: usize) -> BTreeMap<u8, (f64, f64)> {
     sums.into_iter()
         .map(|(id, (x, y, n))| (id, (x / n, y / n)))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixture;
+
+    #[test]
+    fn suite_sequences_are_named_by_their_folder() {
+        let sequence = fixture::sequence();
+        let view = SequenceView::new(&sequence, Path::new("data/test/boxes-300001/sequence.npz"));
+        assert_eq!(view.name, "boxes-300001");
+        assert_eq!(view.preset, "slide");
+    }
+
+    #[test]
+    fn preset_falls_back_to_the_parent_folder() {
+        let mut sequence = fixture::sequence();
+        sequence.meta = "{}".to_owned();
+        let view = SequenceView::new(&sequence, Path::new("recordings/evimo-table/seq_01.npz"));
+        assert_eq!(
+            (view.name.as_str(), view.preset.as_str()),
+            ("seq_01", "evimo-table")
+        );
+    }
+
+    #[test]
+    fn frames_are_found_within_tolerance_only() {
+        let sequence = fixture::sequence();
+        let view = SequenceView::new(&sequence, Path::new("s.npz"));
+        assert_eq!(view.frame_at(20_000), Some(2));
+        assert_eq!(view.frame_at(20_400), Some(2));
+        assert_eq!(view.frame_at(25_000), None);
+        assert_eq!(view.frame_at(1_000_000), None);
+    }
+
+    #[test]
+    fn object_speed_matches_the_fixture() {
+        let sequence = fixture::sequence();
+        let view = SequenceView::new(&sequence, Path::new("s.npz"));
+        // 0.2 px/ms = 200 px/s.
+        let speed = view.object_speed_px_per_s(100_000).unwrap();
+        assert!((speed - 200.0).abs() < 1e-9, "{speed}");
+        assert_eq!(view.object_speed_px_per_s(400_000), None);
+    }
 }

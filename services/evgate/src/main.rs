@@ -2,6 +2,7 @@
 //! parses the command line, sets up logging and dispatches.
 
 mod convert;
+mod eval;
 mod info;
 
 use clap::{Parser, Subcommand};
@@ -21,6 +22,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Convert an event file; the output format follows the extension (.csv, .raw EVT 3.0, .evg).
     Convert(convert::ConvertArgs),
+    /// Score the model and the baselines on labelled sequences; write JSON, Markdown and plots.
+    Eval(eval::EvalArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -32,5 +35,6 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Info(args) => info::run(args),
         Command::Convert(args) => convert::run(args),
+        Command::Eval(args) => eval::run(args),
     }
 }

@@ -1,0 +1,338 @@
+//! `evgate eval`: scores the model and the baselines (OMS, no forecast, linear extrapolation,
+//! oracle) on a split of the simulator's suite or on labelled sequences, and writes the report
+//! (JSON, Markdown tables, PNG plots).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clap::Args;
+use evgate_eval::{write_report, EvalConfig, Evaluation, LoadedModel, Report};
+use evgate_io::sequence::LabelledSequence;
+use evgate_model::{ModelRuntime, Provider, RuntimeOptions};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// The committed model, evaluated when no `--model` is given.
+const DEFAULT_MODEL: &str = "models/evgate-S.onnx";
+
+/// Evaluate forecasts and baselines on labelled sequences and write a report.
+#[derive(Args)]
+pub struct EvalArgs {
+    /// Suite split to evaluate: train, val or test (sequences under SUITE/SPLIT/*/sequence.npz).
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Root folder of the simulator's suite (as written by `evgate sim suite`).
+    #[arg(long, default_value = "data")]
+    pub suite: PathBuf,
+    /// Labelled sequence files (.npz, docs/sequence-format.md) to evaluate instead of a split.
+    #[arg(long = "sequence", value_name = "FILE")]
+    pub sequences: Vec<PathBuf>,
+    /// ONNX model(s); the first is the model under test (its current mask also feeds the
+    /// no-forecast and linear baselines), others appear in the ablation and model-size tables.
+    /// Default: models/evgate-S.onnx when it exists.
+    #[arg(long = "model", value_name = "FILE")]
+    pub models: Vec<PathBuf>,
+    /// Evaluate the baselines only (no-forecast and linear then start from the ground truth).
+    #[arg(long, conflicts_with = "models")]
+    pub no_model: bool,
+    /// Folder for report.json, report.md and the plots (created if missing).
+    #[arg(long, default_value = "reports/eval")]
+    pub report: PathBuf,
+    /// JSON evaluation settings (kebab-case keys of EvalConfig; missing keys keep defaults,
+    /// see docs/evaluation.md).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Evaluate at most this many sequences (taken round-robin over presets, so every preset
+    /// is represented).
+    #[arg(long)]
+    pub max_sequences: Option<usize>,
+    /// Score only the first this-many seconds of each sequence.
+    #[arg(long)]
+    pub max_seconds: Option<f64>,
+    /// Only sequences of these presets (repeatable), e.g. --preset boxes --preset fast.
+    #[arg(long = "preset", value_name = "NAME")]
+    pub presets: Vec<String>,
+    /// Execution provider of the model: cpu, cuda or auto.
+    #[arg(long, default_value = "cpu")]
+    pub provider: Provider,
+    /// ONNX Runtime threads per operator.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Print the overall summary as JSON on stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: EvalArgs) -> anyhow::Result<()> {
+    let mut config = match &args.config {
+        Some(path) => {
+            let text = fs::read_to_string(path)
+                .with_context(|| format!("cannot read evaluation config {}", path.display()))?;
+            serde_json::from_str::<EvalConfig>(&text).with_context(|| {
+                format!(
+                    "evaluation config {}: invalid JSON or unknown key",
+                    path.display()
+                )
+            })?
+        }
+        None => EvalConfig::default(),
+    };
+    if let Some(seconds) = args.max_seconds {
+        if seconds.is_nan() || seconds <= 0.0 {
+            bail!("--max-seconds must be > 0, got {seconds}");
+        }
+        config.max_seconds_per_sequence = Some(seconds);
+    }
+
+    let (split, mut paths) = if args.sequences.is_empty() {
+        (
+            Some(args.split.clone()),
+            split_sequences(&args.suite, &args.split)?,
+        )
+    } else {
+        (None, args.sequences.clone())
+    };
+    paths = select(paths, &args.presets, args.max_sequences);
+    if paths.is_empty() {
+        bail!(
+            "no sequence left to evaluate (presets {:?}, --max-sequences {:?})",
+            args.presets,
+            args.max_sequences
+        );
+    }
+
+    let model_paths = if args.no_model {
+        Vec::new()
+    } else if args.models.is_empty() {
+        let default = PathBuf::from(DEFAULT_MODEL);
+        if default.is_file() {
+            vec![default]
+        } else {
+            tracing::warn!(
+                "{DEFAULT_MODEL} not found and no --model given: evaluating the baselines only"
+            );
+            Vec::new()
+        }
+    } else {
+        args.models.clone()
+    };
+    let options = RuntimeOptions {
+        provider: args.provider,
+        intra_threads: args.threads,
+        ..RuntimeOptions::default()
+    };
+    let mut models = Vec::new();
+    for path in &model_paths {
+        let runtime = ModelRuntime::load(path, options.clone())
+            .with_context(|| format!("cannot load model {}", path.display()))?;
+        let label = path.file_stem().map_or_else(
+            || path.display().to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        );
+        models.push(LoadedModel { label, runtime });
+    }
+
+    let mut evaluation = Evaluation::new(config, models)?;
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} windows ({eta} left) {msg}",
+        )
+        .expect("valid progress template"),
+    );
+    for (index, path) in paths.iter().enumerate() {
+        bar.set_message(format!(
+            "sequence {}/{}: loading {}",
+            index + 1,
+            paths.len(),
+            path.display()
+        ));
+        let sequence = LabelledSequence::read(path)
+            .with_context(|| format!("cannot read labelled sequence {}", path.display()))?;
+        bar.inc_length(evaluation.reference_count(&sequence, path) as u64);
+        bar.set_message(format!(
+            "sequence {}/{}: {}",
+            index + 1,
+            paths.len(),
+            path.display()
+        ));
+        let result = evaluation.evaluate_sequence(&sequence, path, || bar.inc(1))?;
+        tracing::info!(sequence = %result.name, preset = %result.preset, references = result.references, "evaluated");
+    }
+    bar.finish_and_clear();
+
+    let report = evaluation.finish(split)?;
+    let written = write_report(&report, &args.report)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report.overall)?);
+    } else {
+        print_summary(&report);
+        println!("wrote {}", written.markdown.display());
+        println!("wrote {}", written.json.display());
+        for plot in &written.plots {
+            println!("wrote {}", plot.display());
+        }
+    }
+    Ok(())
+}
+
+/// The sequences of one split: SUITE/SPLIT/<name>/sequence.npz and SUITE/SPLIT/*.npz, sorted.
+fn split_sequences(suite: &Path, split: &str) -> anyhow::Result<Vec<PathBuf>> {
+    const SPLITS: [&str; 3] = ["train", "val", "test"];
+    if !SPLITS.contains(&split) {
+        bail!("unknown split {split:?}; accepted: train, val, test");
+    }
+    let folder = suite.join(split);
+    let entries = fs::read_dir(&folder).with_context(|| {
+        format!(
+            "cannot list split folder {} (generate the suite with `evgate sim suite`, or pass \
+             --suite or --sequence)",
+            folder.display()
+        )
+    })?;
+    let mut paths = Vec::new();
+    for entry in entries {
+        let path = entry
+            .with_context(|| format!("cannot list {}", folder.display()))?
+            .path();
+        let nested = path.join("sequence.npz");
+        if nested.is_file() {
+            paths.push(nested);
+        } else if path.extension().is_some_and(|e| e == "npz") {
+            paths.push(path);
+        }
+    }
+    if paths.is_empty() {
+        bail!(
+            "no labelled sequence (*/sequence.npz or *.npz) in {}",
+            folder.display()
+        );
+    }
+    paths.sort();
+    Ok(paths)
+}
+
+/// The preset a suite path belongs to, from its folder name `<preset>-<seed>`.
+fn preset_of(path: &Path) -> Option<String> {
+    let folder = if path.file_name().is_some_and(|n| n == "sequence.npz") {
+        path.parent()?.file_name()?
+    } else {
+        path.file_stem()?
+    };
+    let name = folder.to_string_lossy();
+    Some(
+        name.rsplit_once('-')
+            .map_or(name.as_ref(), |(preset, _)| preset)
+            .to_owned(),
+    )
+}
+
+/// Keeps the wanted presets and at most `max` sequences, taken round-robin over presets.
+fn select(paths: Vec<PathBuf>, presets: &[String], max: Option<usize>) -> Vec<PathBuf> {
+    let mut groups: Vec<(String, Vec<PathBuf>)> = Vec::new();
+    for path in paths {
+        let preset = preset_of(&path).unwrap_or_default();
+        if !presets.is_empty() && !presets.contains(&preset) {
+            continue;
+        }
+        match groups.iter_mut().find(|(p, _)| *p == preset) {
+            Some((_, members)) => members.push(path),
+            None => groups.push((preset, vec![path])),
+        }
+    }
+    let limit = max.unwrap_or(usize::MAX);
+    let mut chosen = Vec::new();
+    let mut round = 0;
+    while chosen.len() < limit {
+        let before = chosen.len();
+        for (_, members) in &groups {
+            if let Some(path) = members.get(round) {
+                if chosen.len() < limit {
+                    chosen.push(path.clone());
+                }
+            }
+        }
+        if chosen.len() == before {
+            break;
+        }
+        round += 1;
+    }
+    chosen
+}
+
+fn percent(value: Option<f64>) -> String {
+    value.map_or_else(|| "–".to_owned(), |v| format!("{:.1}", v * 100.0))
+}
+
+fn print_summary(report: &Report) {
+    let headline = report.config.headline_horizon_ms;
+    println!(
+        "{} sequences, headline horizon {headline} ms (scores in %):",
+        report.sequences.len()
+    );
+    println!(
+        "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9}",
+        "method", "mIoU", "R@0.5", "SR@0.5", "pIoU", "evt F1", "run ms", "age ms"
+    );
+    for method in &report.methods {
+        let Some(summary) = report.overall.get(&method.name) else {
+            continue;
+        };
+        let at = summary.at(headline);
+        println!(
+            "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9}",
+            method.name,
+            percent(at.and_then(|h| h.mean_iou)),
+            percent(at.and_then(|h| h.instance_recall)),
+            percent(at.and_then(|h| h.success_rate)),
+            percent(summary.point_iou),
+            percent(summary.events.f1),
+            summary
+                .runtime_ms_mean
+                .map_or_else(|| "–".to_owned(), |v| format!("{v:.2}")),
+            summary
+                .prediction_age_ms
+                .map_or_else(|| "–".to_owned(), |v| format!("{v:.1}")),
+        );
+    }
+    if let Some(best) = &report.oms_sweep.best {
+        println!(
+            "OMS best of sweep: centre {} surround {} threshold {}: mIoU {} R@0.5 {}",
+            best.parameters.centre_radius,
+            best.parameters.surround_radius,
+            best.parameters.threshold,
+            percent(best.mean_iou),
+            percent(best.instance_recall)
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_come_from_suite_folder_names() {
+        assert_eq!(
+            preset_of(Path::new("data/test/boxes-300001/sequence.npz")).as_deref(),
+            Some("boxes")
+        );
+        assert_eq!(
+            preset_of(Path::new("x/fast-3.npz")).as_deref(),
+            Some("fast")
+        );
+    }
+
+    #[test]
+    fn selection_is_round_robin_over_presets() {
+        let paths: Vec<PathBuf> = ["a-1", "a-2", "a-3", "b-1", "c-1", "c-2"]
+            .iter()
+            .map(|n| PathBuf::from(format!("test/{n}/sequence.npz")))
+            .collect();
+        let chosen = select(paths.clone(), &[], Some(4));
+        let names: Vec<String> = chosen.iter().map(|p| preset_of(p).unwrap()).collect();
+        assert_eq!(names, ["a", "b", "c", "a"]);
+        let only_c = select(paths, &["c".to_owned()], None);
+        assert_eq!(only_c.len(), 2);
+    }
+}
