@@ -22,7 +22,7 @@ pub struct EvalArgs {
     #[arg(long, default_value = "test")]
     pub split: String,
     /// Root folder of the simulator's suite (as written by `evgate sim suite`).
-    #[arg(long, default_value = "data")]
+    #[arg(long, default_value = "data/suite")]
     pub suite: PathBuf,
     /// Labelled sequence files (.npz, docs/sequence-format.md) to evaluate instead of a split.
     #[arg(long = "sequence", value_name = "FILE")]
