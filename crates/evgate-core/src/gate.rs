@@ -137,15 +137,16 @@ pub fn keep_bitmap(
     check_bitmap(keep, events.len())?;
     let lookup = MaskLookup::new(mask);
     let inversion = mode.inversion();
-    let mut keep_bits = BitSink::new(keep);
     let mut kept = 0;
-    for event in events {
-        let (_, bit) = lookup.probe(event);
-        let keep_bit = bit ^ inversion;
-        keep_bits.push(keep_bit);
-        kept += keep_bit as usize;
+    for (chunk, word) in events.chunks(64).zip(keep.iter_mut()) {
+        let mut bits = 0u64;
+        for (position, event) in chunk.iter().enumerate() {
+            let (_, bit) = lookup.probe(event);
+            bits |= (bit ^ inversion) << position;
+        }
+        *word = bits;
+        kept += bits.count_ones() as usize;
     }
-    keep_bits.finish();
     Ok(kept)
 }
 
