@@ -138,23 +138,17 @@ impl Evaluation {
     /// baselines start from the ground-truth mask at the reference time.
     pub fn new(config: EvalConfig, models: Vec<LoadedModel>) -> Result<Self, HarnessError> {
         config.validate()?;
-        let mut methods = vec![MethodInfo::new(MethodKind::Oms(config.oms), &config, None)];
         let source = models.first().map(|m| m.label.clone());
-        methods.push(MethodInfo::new(
-            MethodKind::NoForecast,
-            &config,
-            source.as_deref(),
-        ));
-        methods.push(MethodInfo::new(
-            MethodKind::Linear,
-            &config,
-            source.as_deref(),
-        ));
+        let mut methods = vec![
+            MethodInfo::oms(config.oms),
+            MethodInfo::no_forecast(source.as_deref()),
+            MethodInfo::linear(&config, source.as_deref()),
+        ];
         for (index, model) in models.iter().enumerate() {
             let metadata = model.runtime.metadata();
             methods.push(MethodInfo::model(index, &model.label, metadata, &config));
         }
-        methods.push(MethodInfo::new(MethodKind::Oracle, &config, None));
+        methods.push(MethodInfo::oracle(&config));
         let event_bins = LogBins {
             first_decade: 2,
             last_decade: 6,
@@ -721,6 +715,44 @@ mod tests {
             },
             ..EvalConfig::default()
         }
+    }
+
+    #[test]
+    fn events_are_judged_by_the_mask_of_their_horizon_interval() {
+        let size = SensorSize::new(4, 2);
+        let mut at_0 = vec![false; 8];
+        at_0[size.index(0, 0)] = true;
+        let mut at_10 = vec![false; 8];
+        at_10[size.index(1, 0)] = true;
+        let t = 1_000_000;
+        let events = [
+            evgate_core::Event::new(t + 1_000, 0, 0, true), // mask 0 flags it, an IMO event
+            evgate_core::Event::new(t + 1_000, 1, 0, true), // mask 0 leaves it, background
+            evgate_core::Event::new(t + 2_000, 2, 1, false), // missed IMO event
+            evgate_core::Event::new(t + 9_000, 0, 0, true), // mask 10 ms leaves it, background
+            evgate_core::Event::new(t + 9_000, 1, 0, true), // mask 10 ms flags it, an IMO event
+            evgate_core::Event::new(t + 9_500, 9, 9, true), // off the sensor: unjudged
+        ];
+        let labels = [3, 0, 3, 0, 3, 3];
+        let counts = score_events(
+            &(&events[..], &labels[..]),
+            t,
+            &[0, 1],
+            &[0, 10_000],
+            &[at_0, at_10],
+            size,
+        )
+        .ok()
+        .unwrap();
+        assert_eq!(
+            counts,
+            EventConfusion {
+                true_positive: 2,
+                false_positive: 0,
+                false_negative: 1,
+                true_negative: 2
+            }
+        );
     }
 
     #[test]

@@ -51,54 +51,49 @@ pub struct MethodInfo {
 }
 
 impl MethodInfo {
-    /// A baseline; `current_source` names the model whose current mask the no-forecast and
-    /// linear baselines build on (`None`: the ground truth at the reference time).
-    pub fn new(kind: MethodKind, config: &EvalConfig, current_source: Option<&str>) -> Self {
-        let source = current_source.map_or_else(
-            || "the ground-truth mask at t".to_owned(),
-            |model| format!("the current mask of {model}"),
-        );
-        let (name, description, forecast_horizon_ms) = match kind {
-            MethodKind::Oms(p) => (
-                "oms".to_owned(),
-                format!(
-                    "OMS, centre radius {}, surround radius {}, threshold {} (published EVIMO setting), \
-                     same mask for every horizon",
-                    p.centre_radius, p.surround_radius, p.threshold
-                ),
-                0.0,
-            ),
-            MethodKind::NoForecast => (
-                "no-forecast".to_owned(),
-                format!("{source}, used for every horizon"),
-                0.0,
-            ),
-            MethodKind::Linear => (
-                "linear".to_owned(),
-                format!("{source}, components shifted by their centroid velocity over the last window"),
-                f64::from(config.headline_horizon_ms),
-            ),
-            MethodKind::Oracle => (
-                "oracle".to_owned(),
-                "ground-truth masks of every instant (upper bound for gating)".to_owned(),
-                f64::from(config.headline_horizon_ms),
-            ),
-            MethodKind::Model(_) => ("model".to_owned(), "network".to_owned(), 0.0),
-        };
-        let gflops = match kind {
-            MethodKind::Oms(parameters) => {
-                Some(parameters.flops_per_frame(GFLOPS_REFERENCE_SENSOR) as f64 / 1e9)
-            }
-            _ => None,
-        };
+    fn baseline(name: &str, description: String, kind: MethodKind, horizon_ms: f64) -> Self {
         Self {
-            name,
+            name: name.to_owned(),
             description,
             kind,
-            forecast_horizon_ms,
-            gflops,
+            forecast_horizon_ms: horizon_ms,
+            gflops: None,
             model: None,
         }
+    }
+
+    pub fn oms(parameters: OmsParameters) -> Self {
+        let description = format!(
+            "OMS, centre radius {}, surround radius {}, threshold {} (published EVIMO setting), \
+             same mask for every horizon",
+            parameters.centre_radius, parameters.surround_radius, parameters.threshold
+        );
+        Self {
+            gflops: Some(parameters.flops_per_frame(GFLOPS_REFERENCE_SENSOR) as f64 / 1e9),
+            ..Self::baseline("oms", description, MethodKind::Oms(parameters), 0.0)
+        }
+    }
+
+    /// `current_source` names the model whose current mask is held (`None`: the ground truth).
+    pub fn no_forecast(current_source: Option<&str>) -> Self {
+        let description = format!("{}, used for every horizon", source(current_source));
+        Self::baseline("no-forecast", description, MethodKind::NoForecast, 0.0)
+    }
+
+    /// `current_source` names the model whose current mask is extrapolated.
+    pub fn linear(config: &EvalConfig, current_source: Option<&str>) -> Self {
+        let description = format!(
+            "{}, components shifted by their centroid velocity over the last window",
+            source(current_source)
+        );
+        let horizon = f64::from(config.headline_horizon_ms);
+        Self::baseline("linear", description, MethodKind::Linear, horizon)
+    }
+
+    pub fn oracle(config: &EvalConfig) -> Self {
+        let description = "ground-truth masks of every instant (upper bound for gating)".to_owned();
+        let horizon = f64::from(config.headline_horizon_ms);
+        Self::baseline("oracle", description, MethodKind::Oracle, horizon)
     }
 
     pub fn model(index: usize, label: &str, metadata: &ModelMetadata, config: &EvalConfig) -> Self {
@@ -123,4 +118,11 @@ impl MethodInfo {
             }),
         }
     }
+}
+
+fn source(current_source: Option<&str>) -> String {
+    current_source.map_or_else(
+        || "the ground-truth mask at t".to_owned(),
+        |model| format!("the current mask of {model}"),
+    )
 }
