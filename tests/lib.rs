@@ -1,1 +1,218 @@
-//! Helpers shared by the end-to-end tests.
+//! Helpers shared by the end-to-end tests: the service binaries (built on demand next to the
+//! test executable), child processes that can never outlive a test, unique pipeline names and
+//! a bounded wait for everything that could hang.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use evgate_ipc::PipelineNames;
+
+/// Harness failures.
+#[derive(Debug, thiserror::Error)]
+pub enum HarnessError {
+    #[error("cargo build -p {packages} failed ({status}); see its output above")]
+    Build {
+        packages: String,
+        status: ExitStatus,
+    },
+    #[error("cannot run {program}: {source}")]
+    Spawn {
+        program: String,
+        source: std::io::Error,
+    },
+    #[error("{what} did not happen within {timeout:?}")]
+    Timeout { what: String, timeout: Duration },
+    #[error("{binary} printed no JSON summary ({reason}); stdout was: {stdout:?}")]
+    Summary {
+        binary: String,
+        reason: String,
+        stdout: String,
+    },
+}
+
+/// The workspace root (the parent of this package).
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ lies inside the workspace")
+        .to_path_buf()
+}
+
+/// target/<profile>/, where cargo puts the binaries of the profile the tests were built with.
+pub fn binary_directory() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable has a path");
+    // target/<profile>/deps/<test>-<hash>
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("test executables live in target/<profile>/deps")
+        .to_path_buf()
+}
+
+/// Builds the binaries of `packages` with the profile of the tests (once per package and test
+/// process; cargo itself skips up-to-date work) and returns the path of `binary`.
+pub fn binary(package: &str, binary: &str) -> Result<PathBuf, HarnessError> {
+    static BUILT: OnceLock<Mutex<Vec<String>>> = OnceLock::new();
+    let built = BUILT.get_or_init(|| Mutex::new(Vec::new()));
+    let mut built = built
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    if !built.iter().any(|done| done == package) {
+        let directory = binary_directory();
+        let mut command = Command::new(env!("CARGO"));
+        command
+            .current_dir(workspace_root())
+            .args(["build", "-p", package]);
+        if directory.file_name().is_some_and(|name| name == "release") {
+            command.arg("--release");
+        }
+        let status = command.status().map_err(|source| HarnessError::Spawn {
+            program: "cargo".to_owned(),
+            source,
+        })?;
+        if !status.success() {
+            return Err(HarnessError::Build {
+                packages: package.to_owned(),
+                status,
+            });
+        }
+        built.push(package.to_owned());
+    }
+    Ok(binary_directory().join(binary))
+}
+
+/// Pipeline names no other test (or test run) uses.
+pub fn unique_names(test: &str) -> PipelineNames {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|elapsed| elapsed.subsec_nanos())
+        .unwrap_or(0);
+    PipelineNames::new(&format!("e2e-{test}-{}-{nanos}", std::process::id()), "cam")
+        .expect("test names are valid")
+}
+
+/// Polls `condition` every 10 ms until it holds; fails after `timeout`.
+pub fn wait_until(
+    what: &str,
+    timeout: Duration,
+    mut condition: impl FnMut() -> bool,
+) -> Result<(), HarnessError> {
+    let deadline = Instant::now() + timeout;
+    while !condition() {
+        if Instant::now() >= deadline {
+            return Err(HarnessError::Timeout {
+                what: what.to_owned(),
+                timeout,
+            });
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok(())
+}
+
+/// A child process that is killed when dropped, so a failing test leaves nothing running.
+pub struct Process {
+    pub name: String,
+    child: Child,
+    status: Option<ExitStatus>,
+}
+
+impl Process {
+    /// Starts `program` with `args`; stdout is captured (the JSON summary), stderr is shared.
+    pub fn start(program: &Path, args: &[&str]) -> Result<Self, HarnessError> {
+        let name = program
+            .file_name()
+            .map(|name| name.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let mut command = Command::new(program);
+        command
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped());
+        if std::env::var_os("RUST_LOG").is_none() {
+            command.env("RUST_LOG", "warn,iceoryx2_bb_loggers=error");
+        }
+        let child = command.spawn().map_err(|source| HarnessError::Spawn {
+            program: program.display().to_string(),
+            source,
+        })?;
+        Ok(Self {
+            name,
+            child,
+            status: None,
+        })
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Exit status once the process ended.
+    pub fn try_status(&mut self) -> Option<ExitStatus> {
+        if self.status.is_none() {
+            self.status = self.child.try_wait().ok().flatten();
+        }
+        self.status
+    }
+
+    pub fn is_running(&mut self) -> bool {
+        self.try_status().is_none()
+    }
+
+    /// Sends `signal` (e.g. `libc::SIGKILL` to simulate a crash, `libc::SIGTERM` to stop).
+    pub fn signal(&mut self, signal: libc::c_int) {
+        if self.is_running() {
+            // SAFETY: kill(2) on our own unreaped child.
+            unsafe {
+                libc::kill(self.child.id() as libc::pid_t, signal);
+            }
+        }
+    }
+
+    /// Waits for the exit (at most `timeout`) and returns the status and the stdout.
+    pub fn wait(&mut self, timeout: Duration) -> Result<(ExitStatus, String), HarnessError> {
+        let what = format!("exit of {} (pid {})", self.name, self.pid());
+        wait_until(&what, timeout, || self.try_status().is_some())?;
+        let mut stdout = String::new();
+        if let Some(pipe) = self.child.stdout.as_mut() {
+            let _ = pipe.read_to_string(&mut stdout);
+        }
+        Ok((self.status.expect("waited for it"), stdout))
+    }
+
+    /// Waits for a successful exit and parses the JSON summary printed on stdout.
+    pub fn summary(&mut self, timeout: Duration) -> Result<serde_json::Value, HarnessError> {
+        let (status, stdout) = self.wait(timeout)?;
+        if !status.success() {
+            return Err(HarnessError::Summary {
+                binary: self.name.clone(),
+                reason: format!("exit status {status}"),
+                stdout,
+            });
+        }
+        serde_json::from_str(&stdout).map_err(|error| HarnessError::Summary {
+            binary: self.name.clone(),
+            reason: error.to_string(),
+            stdout,
+        })
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        if self.is_running() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Reads an unsigned counter of a JSON summary, e.g. `u64_at(&gate, "/stats/input-events")`.
+pub fn u64_at(summary: &serde_json::Value, pointer: &str) -> u64 {
+    summary
+        .pointer(pointer)
+        .and_then(serde_json::Value::as_u64)
+        .unwrap_or_else(|| panic!("summary has no unsigned number at {pointer}: {summary}"))
+}
