@@ -36,3 +36,12 @@ def test_not_a_zip_is_reported(tmp_path):
     path.write_bytes(b"not a zip")
     with pytest.raises(SequenceFormatError, match="garbage.npz: not a readable .npz"):
         load_sequence(path)
+
+
+def test_manifest_lists_every_sequence_with_its_hash(synthetic_dir, tmp_path):
+    from evgate_train.manifest import build_manifest, file_sha256
+
+    manifest = build_manifest(synthetic_dir)
+    assert [e["path"] for e in manifest["sequences"]] == ["slide-0.npz", "slide-1.npz"]
+    assert manifest["sequences"][1]["seed"] == 1
+    assert manifest["sequences"][0]["sha256"] == file_sha256(synthetic_dir / "slide-0.npz")
