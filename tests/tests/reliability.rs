@@ -1,0 +1,209 @@
+//! The real ingest and gate binaries under failures: crashes, restarts and stuck consumers.
+//! Every wait is bounded; a process still running at the end of a test is killed.
+
+use std::time::{Duration, Instant};
+
+use evgate_core::Event;
+use evgate_e2e::{binary, u64_at, unique_names, wait_until, Process};
+use evgate_ipc::{
+    create_node, BatchHeader, LatestSubscriber, PipelineNames, PipelineStats, Qos, SlicePublisher,
+    SliceSubscriber, Stream,
+};
+
+const TIMEOUT: Duration = Duration::from_secs(90);
+
+fn start_gate(names: &PipelineNames, extra: &[&str]) -> Process {
+    let gate = binary("evgate-gate", "evgate-gate").unwrap();
+    let mut args = vec![
+        "--domain",
+        &names.domain,
+        "--camera",
+        &names.camera,
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    Process::start(&gate, &args).unwrap()
+}
+
+fn start_ingest(names: &PipelineNames, sim_seconds: &str, extra: &[&str]) -> Process {
+    let ingest = binary("evgate-ingest", "evgate-ingest").unwrap();
+    let mut args = vec![
+        "--domain",
+        &names.domain,
+        "--camera",
+        &names.camera,
+        "--json",
+        "--fast",
+        "--sim-duration-s",
+        sim_seconds,
+        "--wait-for-subscribers",
+        "1",
+    ];
+    args.extend_from_slice(extra);
+    Process::start(&ingest, &args).unwrap()
+}
+
+/// Counts the subscribers of the events stream through a publisher of our own.
+fn events_probe(
+    node: &evgate_ipc::Node,
+    names: &PipelineNames,
+) -> SlicePublisher<Event, BatchHeader> {
+    SlicePublisher::open(node, names, Stream::Events, &Qos::default()).unwrap()
+}
+
+fn wait_for_stats(
+    stats: &LatestSubscriber<PipelineStats>,
+    what: &str,
+    mut accept: impl FnMut(&PipelineStats) -> bool,
+) {
+    wait_until(what, TIMEOUT, || {
+        stats.latest().unwrap().is_some_and(|s| accept(&s))
+    })
+    .unwrap();
+}
+
+#[test]
+fn every_simulated_event_is_accounted_for_from_ingest_to_gate() {
+    let names = unique_names("account");
+    let mut gate = start_gate(&names, &["--exit-at-end-of-stream"]);
+    let mut ingest = start_ingest(&names, "0.1", &[]);
+    let ingest_summary = ingest.summary(TIMEOUT).unwrap();
+    let gate_summary = gate.summary(TIMEOUT).unwrap();
+    let published = u64_at(&ingest_summary, "/events-published");
+    assert!(
+        published > 1_000,
+        "the simulated camera produced only {published} events"
+    );
+    assert_eq!(u64_at(&gate_summary, "/stats/input-events"), published);
+    assert_eq!(u64_at(&gate_summary, "/stats/dropped-events"), 0);
+    assert_eq!(
+        u64_at(&gate_summary, "/stats/input-batches"),
+        u64_at(&ingest_summary, "/batches-published")
+    );
+    assert_eq!(gate_summary["balanced"], true);
+}
+
+#[test]
+fn killing_the_gate_never_blocks_the_ingest() {
+    let names = unique_names("killgate");
+    let node = create_node("killgate-test").unwrap();
+    let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats).unwrap();
+    let mut gate = start_gate(&names, &["--stats-interval-ms", "10"]);
+    // Block (the default) with a short timeout: a dead reader costs at most one timeout.
+    let mut ingest = start_ingest(&names, "0.6", &["--block-timeout-ms", "200"]);
+    wait_for_stats(&stats, "the gate gating its first events", |s| {
+        s.input_events > 0
+    });
+    gate.signal(libc::SIGKILL);
+    let killed_at = Instant::now();
+    let summary = ingest.summary(TIMEOUT).unwrap();
+    assert_eq!(summary["ended-by"], "end-of-stream");
+    assert!(u64_at(&summary, "/events-published") > 0);
+    // The ingest went on without its reader: it finished, bounded by the watchdog above.
+    assert!(!gate.is_running());
+    eprintln!(
+        "ingest finished {:?} after the gate was killed",
+        killed_at.elapsed()
+    );
+}
+
+#[test]
+fn a_stuck_consumer_never_blocks_the_gate_and_its_losses_are_counted() {
+    for (overflow, extra) in [
+        ("drop-and-count", vec![]),
+        ("block", vec!["--block-timeout-ms", "5"]),
+    ] {
+        let names = unique_names("stuck");
+        let node = create_node("stuck-test").unwrap();
+        // Subscribed, never read: its one-sample buffer is full after the first batch.
+        let stuck = SliceSubscriber::<Event, BatchHeader>::open(
+            &node,
+            &names,
+            Stream::Kept,
+            &Qos {
+                buffer_size: 1,
+                ..Qos::default()
+            },
+        )
+        .unwrap();
+        let mut args = vec![
+            "--exit-at-end-of-stream",
+            "--outputs",
+            "kept",
+            "--overflow",
+            overflow,
+        ];
+        args.extend_from_slice(&extra);
+        let mut gate = start_gate(&names, &args);
+        let mut ingest = start_ingest(&names, "0.05", &[]);
+        let ingest_summary = ingest.summary(TIMEOUT).unwrap();
+        let gate_summary = gate.summary(TIMEOUT).unwrap();
+        let published = u64_at(&ingest_summary, "/events-published");
+        assert_eq!(
+            u64_at(&gate_summary, "/stats/input-events"),
+            published,
+            "overflow {overflow}"
+        );
+        assert_eq!(
+            u64_at(&gate_summary, "/stats/dropped-events"),
+            0,
+            "overflow {overflow}"
+        );
+        assert_eq!(gate_summary["balanced"], true, "overflow {overflow}");
+        let batches = u64_at(&ingest_summary, "/batches-published");
+        assert_eq!(
+            u64_at(&gate_summary, "/stats/output-samples-undelivered"),
+            batches - 1,
+            "overflow {overflow}"
+        );
+        drop(stuck);
+    }
+}
+
+#[test]
+fn a_crashed_gate_is_cleaned_up_and_its_replacement_serves_a_restarted_ingest() {
+    let names = unique_names("crash");
+    let node = create_node("crash-test").unwrap();
+    let probe = events_probe(&node, &names);
+    let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats).unwrap();
+
+    let mut crashed = start_gate(&names, &[]);
+    wait_until("the first gate subscribing", TIMEOUT, || {
+        probe.subscriber_count() == 1
+    })
+    .unwrap();
+    crashed.signal(libc::SIGKILL);
+    crashed.wait(TIMEOUT).unwrap();
+
+    // The replacement removes the dead gate's ports when it starts: one subscriber, not two.
+    let mut gate = start_gate(
+        &names,
+        &["--exit-at-end-of-stream", "--stats-interval-ms", "10"],
+    );
+    wait_until("the replacement gate subscribing", TIMEOUT, || {
+        probe.subscriber_count() == 1
+    })
+    .unwrap();
+    wait_for_stats(&stats, "the replacement gate publishing stats", |_| true);
+    assert_eq!(probe.subscriber_count(), 1);
+
+    // An ingest that crashes mid-stream, then a fresh one: the gate follows the new stream.
+    let mut first = start_ingest(&names, "5", &[]);
+    wait_for_stats(&stats, "the gate gating the first stream", |s| {
+        s.input_events > 0
+    });
+    first.signal(libc::SIGKILL);
+    first.wait(TIMEOUT).unwrap();
+    let mut second = start_ingest(&names, "0.05", &[]);
+    let ingest_summary = second.summary(TIMEOUT).unwrap();
+    let gate_summary = gate.summary(TIMEOUT).unwrap();
+    assert_eq!(
+        u64_at(&gate_summary, "/stats/stream-id"),
+        u64_at(&ingest_summary, "/stream-id")
+    );
+    assert_eq!(
+        u64_at(&gate_summary, "/stats/input-events"),
+        u64_at(&ingest_summary, "/events-published")
+    );
+    assert_eq!(gate_summary["balanced"], true);
+}
