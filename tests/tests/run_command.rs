@@ -1,0 +1,81 @@
+//! `evgate run`: the three services as children, a summary with counters and per-event scores.
+
+use std::time::Duration;
+
+use evgate_e2e::{binary, u64_at, workspace_root, Process};
+
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Builds what `evgate run` starts: it finds the services next to its own executable.
+fn evgate() -> std::path::PathBuf {
+    binary("evgate-ingest", "evgate-ingest").unwrap();
+    binary("evgate-gate", "evgate-gate").unwrap();
+    binary("evgate", "evgate").unwrap()
+}
+
+#[test]
+fn run_without_inference_passes_everything_and_scores_it_against_the_labels() {
+    let mut run = Process::start(
+        &evgate(),
+        &[
+            "run",
+            "--no-infer",
+            "--duration",
+            "0.1",
+            "--fast",
+            "--json",
+            "--status-interval-ms",
+            "50",
+        ],
+    )
+    .unwrap();
+    let summary = run.summary(TIMEOUT).unwrap();
+    assert_eq!(summary["ended-by"], "end-of-stream");
+    assert_eq!(summary["balanced"], true);
+    let input = u64_at(&summary, "/stats/input-events");
+    assert!(input > 0);
+    assert_eq!(u64_at(&summary, "/stats/unjudged-passed-events"), input);
+    // Every event was scored; with nothing suppressed, recall is 1 and nothing is negative.
+    assert_eq!(u64_at(&summary, "/scores/events-scored"), input);
+    assert_eq!(u64_at(&summary, "/scores/false-negative"), 0);
+    assert_eq!(u64_at(&summary, "/scores/true-negative"), 0);
+    assert_eq!(summary["scores"]["recall"], 1.0);
+    assert_eq!(
+        u64_at(&summary, "/services/evgate-ingest/events-published"),
+        input
+    );
+}
+
+#[test]
+fn run_with_the_bundled_model_suppresses_and_reports_inference() {
+    let model = workspace_root().join("models/evgate-S.onnx");
+    assert!(
+        model.is_file(),
+        "{} is missing: it is the bundled model `evgate run` uses",
+        model.display()
+    );
+    binary("evgate-infer", "evgate-infer").unwrap();
+    let mut run = Process::start(
+        &evgate(),
+        &[
+            "run",
+            "--duration",
+            "0.3",
+            "--json",
+            "--model",
+            model.to_str().unwrap(),
+            "--status-interval-ms",
+            "50",
+        ],
+    )
+    .unwrap();
+    let summary = run.summary(TIMEOUT).unwrap();
+    assert_eq!(summary["ended-by"], "end-of-stream");
+    assert_eq!(summary["balanced"], true);
+    assert!(u64_at(&summary, "/stats/forecasts-received") > 0);
+    assert!(u64_at(&summary, "/stats/forecasts-used") > 0);
+    let judged =
+        u64_at(&summary, "/stats/kept-events") + u64_at(&summary, "/stats/suppressed-events");
+    assert!(judged > 0, "no event was judged by a forecast: {summary}");
+    assert!(summary["scores"]["f1"].is_number());
+}
