@@ -31,6 +31,8 @@ pub struct CsvDecoder {
     unit: Option<TimeUnit>,
     line_number: u64,
     header_allowed: bool,
+    /// Reused for every line so reading allocates nothing per event.
+    line: Vec<u8>,
 }
 
 impl CsvDecoder {
@@ -43,6 +45,7 @@ impl CsvDecoder {
             unit: None,
             line_number: 0,
             header_allowed: true,
+            line: Vec::new(),
         }
     }
 
@@ -61,28 +64,42 @@ impl CsvDecoder {
     /// Clears `out` and fills it with up to 65 536 events; 0 means end of stream.
     pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
         out.clear();
+        let mut line = std::mem::take(&mut self.line);
+        let result = self.fill(out, &mut line);
+        self.line = line;
+        result
+    }
+
+    fn fill(&mut self, out: &mut Vec<Event>, line: &mut Vec<u8>) -> Result<usize, DecodeError> {
         while out.len() < CHUNK_EVENTS {
-            let Some((offset, line)) = self.source.read_line(MAX_LINE)? else {
+            let Some(offset) = self.source.read_line(MAX_LINE, line)? else {
                 break;
             };
             self.line_number += 1;
-            let text = std::str::from_utf8(&line)
+            let text = std::str::from_utf8(line)
                 .map_err(|_| self.error(offset, "is not UTF-8 text".into()))?;
             let text = text.trim();
             if text.is_empty() || text.starts_with('#') {
                 continue;
             }
-            let fields: Vec<&str> = text
-                .split(|c: char| c == ',' || c.is_whitespace())
+            let mut fields = [""; 4];
+            let mut count = 0;
+            for field in text
+                .split(|c: char| c == ',' || c.is_ascii_whitespace())
                 .filter(|f| !f.is_empty())
-                .collect();
-            let first_is_number = fields.first().is_some_and(|f| f.parse::<f64>().is_ok());
-            if self.header_allowed && !first_is_number {
-                self.header_allowed = false;
-                continue;
+            {
+                if let Some(slot) = fields.get_mut(count) {
+                    *slot = field;
+                }
+                count += 1;
             }
-            self.header_allowed = false;
-            let event = self.parse(offset, &fields)?;
+            if self.header_allowed {
+                self.header_allowed = false;
+                if fields[0].parse::<f64>().is_err() {
+                    continue;
+                }
+            }
+            let event = self.parse(offset, &fields, count)?;
             self.admission.admit(out, event, offset);
         }
         Ok(out.len())
@@ -96,12 +113,14 @@ impl CsvDecoder {
         }
     }
 
-    fn parse(&mut self, offset: u64, fields: &[&str]) -> Result<Event, DecodeError> {
-        if fields.len() != 4 {
-            return Err(self.error(
-                offset,
-                format!("has {} fields, expected 4 (t x y p)", fields.len()),
-            ));
+    fn parse(
+        &mut self,
+        offset: u64,
+        fields: &[&str; 4],
+        count: usize,
+    ) -> Result<Event, DecodeError> {
+        if count != 4 {
+            return Err(self.error(offset, format!("has {count} fields, expected 4 (t x y p)")));
         }
         let looks_fractional = fields[0].contains(['.', 'e', 'E']);
         let unit = *self.unit.get_or_insert(if looks_fractional {

@@ -21,8 +21,9 @@ impl PropheseeHeader {
     /// Reads all `%` lines, leaving the source at the first data byte.
     pub fn read(source: &mut ByteSource) -> Result<Self, DecodeError> {
         let mut fields = BTreeMap::new();
+        let mut line = Vec::new();
         while source.peek()? == Some(b'%') {
-            let Some((offset, line)) = source.read_line(MAX_HEADER_LINE)? else {
+            let Some(offset) = source.read_line(MAX_HEADER_LINE, &mut line)? else {
                 break;
             };
             let text = std::str::from_utf8(&line).map_err(|_| DecodeError::BadHeader {

@@ -110,20 +110,26 @@ impl ByteSource {
         Ok(bytes)
     }
 
-    /// Consumes one line (without its `\n` or `\r\n`); `None` at end of stream. Lines are capped
-    /// at `max_len` bytes so a binary file mistaken for text cannot exhaust memory.
-    pub fn read_line(&mut self, max_len: usize) -> Result<Option<(u64, Vec<u8>)>, DecodeError> {
+    /// Consumes one line into `line` (without its `\n` or `\r\n`) and returns its offset;
+    /// `None` at end of stream. Lines are capped at `max_len` bytes so a binary file mistaken for
+    /// text cannot exhaust memory.
+    pub fn read_line(
+        &mut self,
+        max_len: usize,
+        line: &mut Vec<u8>,
+    ) -> Result<Option<u64>, DecodeError> {
+        line.clear();
         let line_offset = self.offset();
         let mut scanned = 0;
         loop {
             if let Some(pos) = self.available()[scanned..].iter().position(|&b| b == b'\n') {
                 let end = self.start + scanned + pos;
-                let mut line = self.buf[self.start..end].to_vec();
+                line.extend_from_slice(&self.buf[self.start..end]);
                 self.start = end + 1;
                 if line.last() == Some(&b'\r') {
                     line.pop();
                 }
-                return Ok(Some((line_offset, line)));
+                return Ok(Some(line_offset));
             }
             scanned = self.end - self.start;
             if scanned > max_len {
@@ -137,9 +143,9 @@ impl ByteSource {
                 if self.start == self.end {
                     return Ok(None);
                 }
-                let line = self.available().to_vec();
+                line.extend_from_slice(self.available());
                 self.start = self.end;
-                return Ok(Some((line_offset, line)));
+                return Ok(Some(line_offset));
             }
         }
     }
@@ -185,8 +191,11 @@ mod tests {
     #[test]
     fn lines_then_records_keep_offsets() {
         let mut src = source(b"% a\r\n% bb\n\x01\x02\x03\x04\x05");
-        assert_eq!(src.read_line(100).unwrap(), Some((0, b"% a".to_vec())));
-        assert_eq!(src.read_line(100).unwrap(), Some((5, b"% bb".to_vec())));
+        let mut line = Vec::new();
+        assert_eq!(src.read_line(100, &mut line).unwrap(), Some(0));
+        assert_eq!(line, b"% a");
+        assert_eq!(src.read_line(100, &mut line).unwrap(), Some(5));
+        assert_eq!(line, b"% bb");
         assert_eq!(src.peek().unwrap(), Some(1));
         let (offset, records) = src.next_records(2, "word").unwrap();
         assert_eq!((offset, records), (10, &[1u8, 2, 3, 4][..]));
