@@ -24,16 +24,19 @@ pub enum Format {
     Csv,
     /// evgate's own `.evg`.
     Native,
+    /// EVIMO `.npz` (`events` array of `[t s, x, y, p]` rows).
+    EvimoNpz,
 }
 
 impl Format {
-    pub const ALL: [Format; 6] = [
+    pub const ALL: [Format; 7] = [
         Format::Evt2,
         Format::Evt3,
         Format::Dat,
         Format::Aedat4,
         Format::Csv,
         Format::Native,
+        Format::EvimoNpz,
     ];
 
     pub fn name(self) -> &'static str {
@@ -44,6 +47,7 @@ impl Format {
             Format::Aedat4 => "aedat4",
             Format::Csv => "csv",
             Format::Native => "evg",
+            Format::EvimoNpz => "evimo-npz",
         }
     }
 
@@ -121,12 +125,13 @@ fn detect_from(path: &Path, source: &mut ByteSource) -> Result<Format, DecodeErr
     match extension(path).as_deref() {
         Some("csv" | "txt") => Ok(Format::Csv),
         Some("dat") => Ok(Format::Dat),
+        Some("npz") if first == Some(b'P') => Ok(Format::EvimoNpz),
         Some("raw") => Err(unrecognised("a RAW file must start with a `%` header".into())),
         Some("aedat4") => Err(unrecognised("an AEDAT 4 file must start with `#!AER-DAT4.0`".into())),
         Some("evg") => Err(unrecognised("an .evg file must start with the .evg magic".into())),
         _ if first.is_none() => Err(unrecognised("the file is empty and its extension names no format".into())),
         other => Err(unrecognised(format!(
-            "format not recognised from the first bytes nor the extension {:?} (accepted: .raw EVT 2.0/3.0, .dat, .aedat4, .csv/.txt, .evg)",
+            "format not recognised from the first bytes nor the extension {:?} (accepted: .raw EVT 2.0/3.0, .dat, .aedat4, .csv/.txt, .evg, EVIMO .npz)",
             other.unwrap_or_default()
         ))),
     }

@@ -11,6 +11,7 @@ pub mod csv;
 pub mod csv_writer;
 pub mod dat;
 pub mod error;
+pub mod evimo;
 pub mod evt2;
 pub mod evt3;
 pub mod evt3_writer;

@@ -8,6 +8,7 @@ use crate::aedat4::Aedat4Decoder;
 use crate::csv::CsvDecoder;
 use crate::dat::DatDecoder;
 use crate::error::DecodeError;
+use crate::evimo::EvimoDecoder;
 use crate::evt2::Evt2Decoder;
 use crate::evt3::Evt3Decoder;
 use crate::format::{detect, Format};
@@ -57,6 +58,7 @@ event_reader!(DatDecoder, Format::Dat);
 event_reader!(Aedat4Decoder, Format::Aedat4);
 event_reader!(CsvDecoder, Format::Csv);
 event_reader!(NativeDecoder, Format::Native);
+event_reader!(EvimoDecoder, Format::EvimoNpz);
 
 /// The size text inputs get when none is given: every coordinate fits, nothing is dropped.
 pub const UNBOUNDED_SENSOR: SensorSize = SensorSize::new(u16::MAX, u16::MAX);
@@ -84,6 +86,10 @@ pub fn open_with(
         Some(format) => format,
         None => detect(path)?,
     };
+    if format == Format::EvimoNpz {
+        // A zip is read by member, not as one byte stream.
+        return Ok(Box::new(EvimoDecoder::open(path, options.sensor_size)?));
+    }
     let file = std::fs::File::open(path).map_err(|source| DecodeError::Open {
         path: path.to_path_buf(),
         source,
@@ -135,6 +141,14 @@ fn from_source(
             options.sensor_size.unwrap_or(UNBOUNDED_SENSOR),
         )),
         Format::Native => Box::new(NativeDecoder::new(source)?),
+        Format::EvimoNpz => {
+            return Err(DecodeError::Unrecognised {
+                path: source.path().to_path_buf(),
+                problem:
+                    "EVIMO .npz files are read from a path (zip members), not from a byte stream"
+                        .into(),
+            })
+        }
     })
 }
 
