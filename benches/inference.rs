@@ -1,0 +1,306 @@
+//! Inference latency of an exported network, window after window with the recurrent state
+//! carried, as the infer service runs it: voxelisation, the ONNX Runtime call, thresholding of
+//! the current and horizon masks, and the prediction age (horizon − runtime) they leave.
+//!
+//! A bench binary rather than criterion because the figures wanted are a median and a p99 per
+//! stage, written as JSON. Settings come from the environment:
+//!
+//! | variable | default |
+//! |---|---|
+//! | `EVGATE_BENCH_MODEL` | `models/evgate-S.onnx` |
+//! | `EVGATE_BENCH_THREADS` | 2 (intra-op threads) |
+//! | `EVGATE_BENCH_PROVIDER` | cpu (cpu, cuda, auto) |
+//! | `EVGATE_BENCH_WINDOWS` | 200 measured windows (after 20 warm-up windows) |
+//! | `EVGATE_BENCH_EVENTS` | 100000 events per 50 ms window |
+//! | `EVGATE_BENCH_JSON` | `target/bench-results/inference.json` |
+//!
+//! Run: `cargo bench -p evgate-benches --bench inference`.
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::{Duration, Instant};
+
+use evgate_core::{BitMask, Event, SensorSize, TimeSpan, VoxelGrid};
+use evgate_ipc::MAX_HORIZONS;
+use evgate_model::{ModelRuntime, Provider, RuntimeOptions};
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+const WORKSPACE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+const WINDOW_US: i64 = 50_000;
+const WARM_UP_WINDOWS: usize = 20;
+
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct Stage {
+    median_ms: f64,
+    p99_ms: f64,
+    mean_ms: f64,
+    min_ms: f64,
+    max_ms: f64,
+}
+
+impl Stage {
+    fn of(samples: &[Duration]) -> Self {
+        let mut ms: Vec<f64> = samples.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+        ms.sort_by(f64::total_cmp);
+        let rank = |quantile: f64| {
+            let rank = (quantile * ms.len() as f64).ceil() as usize;
+            ms[rank.clamp(1, ms.len()) - 1]
+        };
+        Self {
+            median_ms: rank(0.5),
+            p99_ms: rank(0.99),
+            mean_ms: ms.iter().sum::<f64>() / ms.len() as f64,
+            min_ms: ms[0],
+            max_ms: ms[ms.len() - 1],
+        }
+    }
+}
+
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct PredictionAge {
+    horizon_ms: f32,
+    /// Horizon − median of voxelisation + inference + thresholding.
+    age_ms: f64,
+}
+
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct InferenceReport {
+    model: PathBuf,
+    model_size: &'static str,
+    sensor: String,
+    input: String,
+    provider: String,
+    intra_threads: usize,
+    cpu_cores_visible: usize,
+    windows: usize,
+    events_per_window: usize,
+    horizons_ms: Vec<f32>,
+    voxelisation: Stage,
+    /// ONNX Runtime call with every default horizon.
+    inference: Stage,
+    /// Process CPU time (all threads) spent in that call: unlike wall time it barely moves when
+    /// other processes compete for the cores, so it shows the work itself.
+    inference_cpu: Stage,
+    /// ONNX Runtime call with the single horizon 100 ms (the cost of the extra horizons).
+    inference_one_horizon: Stage,
+    thresholding: Stage,
+    /// Voxelisation + inference + thresholding per window.
+    total: Stage,
+    prediction_age: Vec<PredictionAge>,
+}
+
+/// User + system CPU time of the whole process so far.
+fn process_cpu_time() -> Duration {
+    // SAFETY: getrusage only writes the zero-initialised struct it is handed.
+    let usage = unsafe {
+        let mut usage: libc::rusage = std::mem::zeroed();
+        libc::getrusage(libc::RUSAGE_SELF, &mut usage);
+        usage
+    };
+    let to_duration = |time: libc::timeval| {
+        Duration::from_secs(time.tv_sec as u64) + Duration::from_micros(time.tv_usec as u64)
+    };
+    to_duration(usage.ru_utime) + to_duration(usage.ru_stime)
+}
+
+fn setting<T: FromStr>(name: &str, default: T) -> T {
+    match std::env::var(name) {
+        Ok(value) => value.parse().unwrap_or_else(|_| {
+            eprintln!("{name}={value:?} is not valid; using the default");
+            default
+        }),
+        Err(_) => default,
+    }
+}
+
+/// A 40 × 40 block moving right at 1 px/ms over uniform background noise: a quarter of the
+/// events on the object, time-sorted.
+fn window_events(
+    rng: &mut ChaCha8Rng,
+    sensor: SensorSize,
+    start_us: i64,
+    count: usize,
+) -> Vec<Event> {
+    (0..count)
+        .map(|index| {
+            let t = start_us + index as i64 * WINDOW_US / count as i64;
+            let (x, y) = if index % 4 == 0 {
+                let left = ((t / 1000) % i64::from(sensor.width - 40)) as u16;
+                (left + rng.gen_range(0..40), 100 + rng.gen_range(0..40))
+            } else {
+                (
+                    rng.gen_range(0..sensor.width),
+                    rng.gen_range(0..sensor.height),
+                )
+            };
+            Event::new(t, x, y, rng.gen())
+        })
+        .collect()
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let model: PathBuf = setting(
+        "EVGATE_BENCH_MODEL",
+        Path::new(WORKSPACE).join("models/evgate-S.onnx"),
+    );
+    let threads: usize = setting("EVGATE_BENCH_THREADS", 2);
+    let provider: Provider = setting("EVGATE_BENCH_PROVIDER", Provider::Cpu);
+    let windows: usize = setting("EVGATE_BENCH_WINDOWS", 200).max(1);
+    let events_per_window: usize = setting("EVGATE_BENCH_EVENTS", 100_000).max(1);
+    let json_path: PathBuf = setting(
+        "EVGATE_BENCH_JSON",
+        Path::new(WORKSPACE).join("target/bench-results/inference.json"),
+    );
+
+    let options = RuntimeOptions {
+        provider,
+        intra_threads: threads,
+        ..RuntimeOptions::default()
+    };
+    let mut runtime = ModelRuntime::load(&model, options)?;
+    let metadata = runtime.metadata().clone();
+    let input = runtime.input_size();
+    // The largest sensor that pads to the model's input is the one it was exported for in
+    // practice (346 × 260 → 352 × 272); use the DAVIS346 size when it fits.
+    let sensor = if SensorSize::new(346, 260).padded_to(16) == input {
+        SensorSize::new(346, 260)
+    } else {
+        input
+    };
+    let horizons_ms: Vec<f32> = (1..=MAX_HORIZONS)
+        .map(|k| metadata.max_horizon_ms * k as f32 / MAX_HORIZONS as f32)
+        .collect();
+    let one_horizon = [metadata.max_horizon_ms];
+
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut grid = VoxelGrid::new(sensor, metadata.bins as usize)?;
+    let mut mask = BitMask::new(sensor)?;
+    let row_stride = usize::from(input.width);
+    let mut voxelisation = Vec::with_capacity(windows);
+    let mut inference = Vec::with_capacity(windows);
+    let mut inference_cpu = Vec::with_capacity(windows);
+    let mut inference_one_horizon = Vec::with_capacity(windows);
+    let mut thresholding = Vec::with_capacity(windows);
+    let mut total = Vec::with_capacity(windows);
+
+    let progress = ProgressBar::new((WARM_UP_WINDOWS + windows) as u64);
+    progress.set_style(ProgressStyle::with_template(
+        "{msg} [{bar:40}] {pos}/{len} windows ({eta} left)",
+    )?);
+    progress.set_message(format!(
+        "{} {} on {provider}, {threads} threads",
+        metadata.model_size.label(),
+        input
+    ));
+    for index in 0..WARM_UP_WINDOWS + windows {
+        let start_us = index as i64 * WINDOW_US;
+        let events = window_events(&mut rng, sensor, start_us, events_per_window);
+        let span = TimeSpan::new(start_us, start_us + WINDOW_US)?;
+
+        let started = Instant::now();
+        grid.clear();
+        grid.accumulate(&events, span);
+        grid.normalise();
+        let voxel_time = started.elapsed();
+
+        let cpu_before = process_cpu_time();
+        let output = runtime.forecast(grid.as_slice(), &horizons_ms)?;
+        let inference_cpu_time = process_cpu_time().saturating_sub(cpu_before);
+        let inference_time = output.inference_time();
+
+        let started = Instant::now();
+        mask.fill_from_logits(output.mask_logits(), row_stride, 0.0)?;
+        for logits in output.future_mask_logits() {
+            mask.fill_from_logits(logits, row_stride, 0.0)?;
+        }
+        let threshold_time = started.elapsed();
+        drop(output);
+
+        // Same window again with the single largest horizon, to show what the extra horizons
+        // cost; not part of the per-window total. It advances the recurrent state too, which
+        // changes its values but not the cost of a run.
+        let one = runtime.forecast(grid.as_slice(), &one_horizon)?;
+        let one_time = one.inference_time();
+
+        if index >= WARM_UP_WINDOWS {
+            voxelisation.push(voxel_time);
+            inference.push(inference_time);
+            inference_cpu.push(inference_cpu_time);
+            inference_one_horizon.push(one_time);
+            thresholding.push(threshold_time);
+            total.push(voxel_time + inference_time + threshold_time);
+        }
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+
+    let total_stage = Stage::of(&total);
+    let report = InferenceReport {
+        model: model.clone(),
+        model_size: metadata.model_size.label(),
+        sensor: sensor.to_string(),
+        input: input.to_string(),
+        provider: runtime.active_provider().to_string(),
+        intra_threads: threads,
+        cpu_cores_visible: std::thread::available_parallelism().map_or(0, |n| n.get()),
+        windows,
+        events_per_window,
+        prediction_age: horizons_ms
+            .iter()
+            .map(|&horizon_ms| PredictionAge {
+                horizon_ms,
+                age_ms: f64::from(horizon_ms) - total_stage.median_ms,
+            })
+            .collect(),
+        horizons_ms,
+        voxelisation: Stage::of(&voxelisation),
+        inference: Stage::of(&inference),
+        inference_cpu: Stage::of(&inference_cpu),
+        inference_one_horizon: Stage::of(&inference_one_horizon),
+        thresholding: Stage::of(&thresholding),
+        total: total_stage,
+    };
+
+    println!(
+        "model {} ({}), sensor {} → input {}, {} on {} threads, {} windows of {} events",
+        report.model.display(),
+        report.model_size,
+        report.sensor,
+        report.input,
+        report.provider,
+        report.intra_threads,
+        report.windows,
+        report.events_per_window
+    );
+    for (name, stage) in [
+        ("voxelisation", &report.voxelisation),
+        ("inference", &report.inference),
+        ("inference cpu time", &report.inference_cpu),
+        ("inference, 1 horizon", &report.inference_one_horizon),
+        ("thresholding", &report.thresholding),
+        ("total", &report.total),
+    ] {
+        println!(
+            "{name:>22}: median {:8.3} ms  p99 {:8.3} ms  mean {:8.3} ms  min {:8.3} ms  max {:8.3} ms",
+            stage.median_ms, stage.p99_ms, stage.mean_ms, stage.min_ms, stage.max_ms
+        );
+    }
+    for age in &report.prediction_age {
+        println!(
+            "prediction age at {:5.1} ms: {:6.2} ms",
+            age.horizon_ms, age.age_ms
+        );
+    }
+    if let Some(directory) = json_path.parent() {
+        std::fs::create_dir_all(directory)?;
+    }
+    std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")?;
+    println!("wrote {}", json_path.display());
+    Ok(())
+}
