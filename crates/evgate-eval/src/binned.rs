@@ -4,6 +4,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::summary::Mean;
 
+/// The events-per-window plot spans 10² to 10⁶ events, as the paper's.
+pub const EVENT_BINS_FIRST_DECADE: u32 = 2;
+pub const EVENT_BINS_LAST_DECADE: u32 = 6;
+
 /// One bin's pooled mean.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

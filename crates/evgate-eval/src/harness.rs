@@ -14,7 +14,7 @@ use evgate_io::sequence::LabelledSequence;
 use evgate_model::{ModelError, ModelRuntime};
 use thiserror::Error;
 
-use crate::binned::{BinnedMeans, LogBins};
+use crate::binned::{BinnedMeans, LogBins, EVENT_BINS_FIRST_DECADE, EVENT_BINS_LAST_DECADE};
 use crate::config::{ConfigError, EvalConfig};
 use crate::event_scores::EventConfusion;
 use crate::instances::match_instances;
@@ -150,8 +150,8 @@ impl Evaluation {
         }
         methods.push(MethodInfo::oracle(&config));
         let event_bins = LogBins {
-            first_decade: 2,
-            last_decade: 6,
+            first_decade: EVENT_BINS_FIRST_DECADE,
+            last_decade: EVENT_BINS_LAST_DECADE,
             per_decade: config.event_bins_per_decade.max(1),
         };
         let binned = methods

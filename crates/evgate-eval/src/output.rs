@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
-use crate::binned::BinValue;
+use crate::binned::{BinValue, EVENT_BINS_FIRST_DECADE, EVENT_BINS_LAST_DECADE};
 use crate::markdown;
 use crate::method::MethodKind;
 use crate::plot::{LinePlot, PlotError, Series, XAxis};
@@ -146,7 +146,10 @@ pub fn write_report(report: &Report, folder: &Path) -> Result<WrittenReport, Out
         mean_iou_plot(
             format!("mIoU at +{headline} ms vs events per window"),
             "events in the 50 ms window (log)",
-            XAxis::Log10,
+            XAxis::Log10 {
+                first_decade: EVENT_BINS_FIRST_DECADE as i32,
+                last_decade: EVENT_BINS_LAST_DECADE as i32,
+            },
             binned_series(&methods, &report.events_per_window, |_, b| {
                 (b.lower.unwrap_or(1.0) * b.upper.unwrap_or(1.0)).sqrt()
             }),

@@ -44,8 +44,8 @@ pub struct Series {
 pub enum XAxis {
     /// Linear axis with ticks every `step`.
     Linear { step: f64 },
-    /// Base-10 logarithmic axis with a tick per decade.
-    Log10,
+    /// Base-10 logarithmic axis from 10^`first_decade` to 10^`last_decade`, a tick per decade.
+    Log10 { first_decade: i32, last_decade: i32 },
     /// Points at x = 0, 1, 2, … labelled with these names.
     Categories(Vec<String>),
 }
@@ -197,13 +197,13 @@ impl LinePlot {
 
     fn x_transform(&self, x: f64) -> f64 {
         match self.x_axis {
-            XAxis::Log10 => x.log10(),
+            XAxis::Log10 { .. } => x.log10(),
             _ => x,
         }
     }
 
     fn render(&self) -> Result<Canvas, PlotError> {
-        if let XAxis::Log10 = self.x_axis {
+        if let XAxis::Log10 { .. } = self.x_axis {
             for series in &self.series {
                 if let Some(&(x, _)) = series.points.iter().find(|(x, _)| *x <= 0.0) {
                     return Err(PlotError::NonPositiveLogX {
@@ -221,9 +221,13 @@ impl LinePlot {
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .map(|(x, _)| self.x_transform(*x))
             .collect();
-        let (mut x_min, mut x_max) = match &self.x_axis {
+        let (x_min, mut x_max) = match &self.x_axis {
             XAxis::Categories(names) => (-0.5, names.len() as f64 - 0.5),
-            _ => xs
+            XAxis::Log10 {
+                first_decade,
+                last_decade,
+            } => (f64::from(*first_decade), f64::from(*last_decade)),
+            XAxis::Linear { .. } => xs
                 .iter()
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
                     (lo.min(x), hi.max(x))
@@ -233,10 +237,6 @@ impl LinePlot {
             return Err(PlotError::NoData {
                 title: self.title.clone(),
             });
-        }
-        if let XAxis::Log10 = self.x_axis {
-            x_min = x_min.floor();
-            x_max = x_max.ceil();
         }
         if x_max <= x_min {
             x_max = x_min + 1.0;
@@ -279,7 +279,7 @@ impl LinePlot {
                 }
                 ticks
             }
-            XAxis::Log10 => (x_min as i64..=x_max as i64)
+            XAxis::Log10 { .. } => (x_min as i64..=x_max as i64)
                 .map(|decade| (decade as f64, format!("1e{decade}")))
                 .collect(),
             XAxis::Categories(names) => names
@@ -395,7 +395,11 @@ mod tests {
 
     #[test]
     fn log_axis_rejects_zero() {
-        let error = plot(XAxis::Log10, vec![(0.0, 1.0)]).render().err().unwrap();
+        let axis = XAxis::Log10 {
+            first_decade: 2,
+            last_decade: 6,
+        };
+        let error = plot(axis, vec![(0.0, 1.0)]).render().err().unwrap();
         assert!(error.to_string().contains("x = 0"));
     }
 
