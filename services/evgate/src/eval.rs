@@ -195,6 +195,10 @@ fn split_sequences(suite: &Path, split: &str) -> anyhow::Result<Vec<PathBuf>> {
         let path = entry
             .with_context(|| format!("cannot list {}", folder.display()))?
             .path();
+        // The suite generator writes into `<name>.partial` and renames when the sequence is done.
+        if path.extension().is_some_and(|e| e == "partial") {
+            continue;
+        }
         let nested = path.join("sequence.npz");
         if nested.is_file() {
             paths.push(nested);
