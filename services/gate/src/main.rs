@@ -140,6 +140,8 @@ struct Gate {
     forecasts_received: u64,
     forecasts_rejected: u64,
     latest_model_runtime_us: i64,
+    stats_interval: Duration,
+    stats_published_at: Instant,
 }
 
 fn run(args: &Args) -> anyhow::Result<GateSummary> {
@@ -190,6 +192,8 @@ fn run(args: &Args) -> anyhow::Result<GateSummary> {
         forecasts_received: 0,
         forecasts_rejected: 0,
         latest_model_runtime_us: NOT_MEASURED,
+        stats_interval: Duration::from_millis(args.stats_interval_ms),
+        stats_published_at: Instant::now(),
     };
     info!(
         events = events.service_name(),
@@ -309,6 +313,11 @@ impl Gate {
             self.take_forecasts(forecasts)?;
             let header = *sample.user_header();
             reached_end |= self.gate_batch(&header, sample.payload())?;
+            // Under a sustained flood this loop does not return to the waitset, whose interval
+            // would then never fire.
+            if self.stats_published_at.elapsed() >= self.stats_interval {
+                self.publish_stats()?;
+            }
         }
         Ok(reached_end)
     }
@@ -349,13 +358,14 @@ impl Gate {
         let stats = &mut self.accounting.stats;
         stats.output_samples_undelivered += undelivered as u64;
         stats.forecasts_used += u64::from(verdict.forecast_used);
-        stats.latest_prediction_age_us = prediction_age_us;
+        // The latest-figures describe real batches, not the empty end-of-stream marker.
         if let Some(last) = events.last() {
             stats.latest_event_time_us = last.t;
+            stats.latest_prediction_age_us = prediction_age_us;
+            stats.latest_kernel_ns = kernel_ns;
+            stats.latest_gate_latency_ns =
+                clock::monotonic_ns().saturating_sub(header.published_at_monotonic_ns) as i64;
         }
-        stats.latest_kernel_ns = kernel_ns;
-        stats.latest_gate_latency_ns =
-            clock::monotonic_ns().saturating_sub(header.published_at_monotonic_ns) as i64;
         if header.is_end_of_stream() {
             self.publish_stats()?;
             info!(stats = ?self.accounting.stats, "end of stream gated");
@@ -372,6 +382,7 @@ impl Gate {
         stats.published_at_monotonic_us = clock::monotonic_us();
         self.stats.publish(*stats)?;
         stats.sequence += 1;
+        self.stats_published_at = Instant::now();
         Ok(())
     }
 }

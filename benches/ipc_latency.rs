@@ -1,0 +1,298 @@
+//! End-to-end latency of the gate over shared memory, next to a raw echo of the same payload.
+//!
+//! For batches of 1 k, 10 k and 100 k events: publish a batch on `<domain>/cam/events`, wait
+//! (on the wake-up listener) until the batch comes back on `.../kept`, and record
+//! published → received from the batch header's CLOCK_MONOTONIC stamp. Two peers do the
+//! middle hop in separate processes: the real `evgate-gate` (a forecast whose masks keep every
+//! event, so the output is as large as the input) and a raw echo (this executable with
+//! `--echo`: the same ports, the batch copied through without gating). The gating kernel
+//! (`ForecastView::keep_bitmap`) is timed on the same batch in this process.
+//!
+//! `cargo bench -p evgate-benches --bench ipc_latency -- --out target/bench/ipc_latency.json`
+
+use std::time::{Duration, Instant};
+
+use evgate_core::{words_for, BitMask, Event, ForecastView, GateMode, SensorSize};
+use evgate_e2e::{binary, unique_names, wait_until, Process};
+use evgate_ipc::{
+    clock, create_node, BatchHeader, ForecastHeader, PipelineNames, Qos, SlicePublisher,
+    SliceSubscriber, Stream,
+};
+use rand::{Rng, SeedableRng};
+use serde_json::json;
+
+const SENSOR: SensorSize = SensorSize::new(346, 260);
+const REFERENCE_US: i64 = 1_000_000;
+const HORIZONS_US: [i64; 2] = [25_000, 50_000];
+const TIMEOUT: Duration = Duration::from_secs(60);
+
+type BenchResult<T> = Result<T, Box<dyn std::error::Error>>;
+
+fn main() -> BenchResult<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let value_of = |flag: &str| {
+        args.iter()
+            .position(|a| a == flag)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    if let Some(domain) = value_of("--echo") {
+        return echo(&PipelineNames::new(&domain, "cam")?);
+    }
+    let out = value_of("--out").unwrap_or_else(|| "target/bench/ipc_latency.json".to_owned());
+    let mut results = Vec::new();
+    for (size, iterations) in [(1_000, 3_000), (10_000, 2_000), (100_000, 500)] {
+        let events = batch(size);
+        let gate = measure_peer(Peer::Gate, &events, iterations)?;
+        let raw = measure_peer(Peer::RawEcho, &events, iterations)?;
+        let kernel = kernel_times(&events, iterations.min(1_000));
+        let kernel_p50 = percentile(&kernel, 0.5);
+        let budget_p99 = 2.0 * (percentile(&raw, 0.99) + kernel_p50);
+        let result = json!({
+            "batch-events": size,
+            "iterations": iterations,
+            "gate-us": summary(&gate),
+            "raw-echo-us": summary(&raw),
+            "gating-kernel-us": summary(&kernel),
+            "target-p99-us (2 x (raw p99 + kernel p50))": budget_p99,
+            "gate-p99-within-target": percentile(&gate, 0.99) <= budget_p99,
+        });
+        eprintln!("{result}");
+        results.push(result);
+    }
+    let report = json!({
+        "bench": "ipc_latency",
+        "machine": machine(),
+        "results": results,
+    });
+    if let Some(parent) = std::path::Path::new(&out).parent() {
+        std::fs::create_dir_all(parent)?;
+    }
+    std::fs::write(&out, serde_json::to_string_pretty(&report)?)?;
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    eprintln!("written to {out}");
+    Ok(())
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Peer {
+    Gate,
+    RawEcho,
+}
+
+/// Random events on the sensor, all inside the forecast's horizons, in time order.
+fn batch(size: usize) -> Vec<Event> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
+    let mut events: Vec<Event> = (0..size)
+        .map(|_| {
+            Event::new(
+                REFERENCE_US + rng.gen_range(0..HORIZONS_US[1]),
+                rng.gen_range(0..SENSOR.width),
+                rng.gen_range(0..SENSOR.height),
+                rng.gen_bool(0.5),
+            )
+        })
+        .collect();
+    events.sort_by_key(|e| e.t);
+    events
+}
+
+/// A forecast whose masks cover the whole sensor: every event is judged and kept.
+fn full_masks() -> Vec<u64> {
+    let mut mask = BitMask::new(SENSOR).expect("non-empty sensor");
+    for y in 0..SENSOR.height {
+        for x in 0..SENSOR.width {
+            mask.set(x, y, true).expect("pixel on the sensor");
+        }
+    }
+    mask.as_words().repeat(1 + HORIZONS_US.len())
+}
+
+fn forecast_header() -> ForecastHeader {
+    let mut header = ForecastHeader {
+        reference_time_us: REFERENCE_US,
+        window_start_us: REFERENCE_US - 50_000,
+        horizon_count: HORIZONS_US.len() as u32,
+        words_per_mask: words_for(SENSOR) as u32,
+        width: SENSOR.width,
+        height: SENSOR.height,
+        ..Default::default()
+    };
+    header.horizons_us[..HORIZONS_US.len()].copy_from_slice(&HORIZONS_US);
+    header
+}
+
+/// Round trips through `peer`, in microseconds.
+fn measure_peer(peer: Peer, events: &[Event], iterations: usize) -> BenchResult<Vec<f64>> {
+    let names = unique_names("latency");
+    let node = create_node("ipc-latency-bench")?;
+    let qos = Qos {
+        initial_max_slice_len: events.len(),
+        ..Qos::default()
+    };
+    let input = SlicePublisher::<Event, BatchHeader>::open(&node, &names, Stream::Events, &qos)?;
+    let output = SliceSubscriber::<Event, BatchHeader>::open(&node, &names, Stream::Kept, &qos)?;
+    let forecasts = SlicePublisher::<u64, ForecastHeader>::open(
+        &node,
+        &names,
+        Stream::Forecast,
+        &Qos::default(),
+    )?;
+    let _peer = start_peer(peer, &names)?;
+    wait_until("the peer subscribing", TIMEOUT, || {
+        input.subscriber_count() == 1
+    })?;
+    if let Peer::Gate = peer {
+        wait_until("the gate subscribing to forecasts", TIMEOUT, || {
+            forecasts.subscriber_count() == 1
+        })?;
+        forecasts.publish(forecast_header(), &full_masks())?;
+    }
+    let warmup = iterations / 10 + 10;
+    let mut latencies = Vec::with_capacity(iterations);
+    for sequence in 0..(warmup + iterations) as u64 {
+        let header = BatchHeader {
+            stream_id: 1,
+            sequence,
+            first_event_index: sequence * events.len() as u64,
+            event_count: events.len() as u64,
+            t_begin_us: events[0].t,
+            t_end_us: events[events.len() - 1].t + 1,
+            published_at_monotonic_ns: clock::monotonic_ns(),
+            width: SENSOR.width,
+            height: SENSOR.height,
+            flags: 0,
+        };
+        input.publish(header, events)?;
+        let received_ns = receive_one(&output, events.len())?;
+        if sequence as usize >= warmup {
+            latencies.push((received_ns - header.published_at_monotonic_ns) as f64 / 1e3);
+        }
+    }
+    Ok(latencies)
+}
+
+/// Sleeps on the wake-up listener until the echoed batch arrives; returns the arrival time.
+fn receive_one(output: &SliceSubscriber<Event, BatchHeader>, expected: usize) -> BenchResult<u64> {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        if let Some(sample) = output.receive()? {
+            let now = clock::monotonic_ns();
+            if sample.payload().len() != expected {
+                return Err(format!(
+                    "peer returned {} events, {expected} expected",
+                    sample.payload().len()
+                )
+                .into());
+            }
+            return Ok(now);
+        }
+        if Instant::now() >= deadline {
+            return Err("the peer did not return the batch within 60 s".into());
+        }
+        output
+            .listener()
+            .timed_wait(|_| {}, Duration::from_millis(100))?;
+    }
+}
+
+fn start_peer(peer: Peer, names: &PipelineNames) -> BenchResult<Process> {
+    Ok(match peer {
+        Peer::Gate => Process::start(
+            &binary("evgate-gate", "evgate-gate")?,
+            &[
+                "--domain",
+                &names.domain,
+                "--camera",
+                &names.camera,
+                "--outputs",
+                "kept",
+                "--no-forecast",
+                "drop",
+                "--stats-interval-ms",
+                "1000",
+            ],
+        )?,
+        Peer::RawEcho => Process::start(&std::env::current_exe()?, &["--echo", &names.domain])?,
+    })
+}
+
+/// The raw peer: copies every batch from the events stream to the kept stream.
+fn echo(names: &PipelineNames) -> BenchResult<()> {
+    let node = create_node("ipc-latency-echo")?;
+    let input =
+        SliceSubscriber::<Event, BatchHeader>::open(&node, names, Stream::Events, &Qos::default())?;
+    let output =
+        SlicePublisher::<Event, BatchHeader>::open(&node, names, Stream::Kept, &Qos::default())?;
+    loop {
+        input.clear_wakeups();
+        while let Some(sample) = input.receive()? {
+            output.publish(*sample.user_header(), sample.payload())?;
+        }
+        // The bench kills this process when done; SIGTERM/SIGINT end the wait too.
+        if input
+            .listener()
+            .timed_wait(|_| {}, Duration::from_millis(100))
+            .is_err()
+        {
+            return Ok(());
+        }
+    }
+}
+
+/// The gate's kernel on the same batch, microseconds per call.
+fn kernel_times(events: &[Event], iterations: usize) -> Vec<f64> {
+    let words = full_masks();
+    let per_mask = words_for(SENSOR);
+    let view = ForecastView::new(REFERENCE_US, &HORIZONS_US, SENSOR, &words[per_mask..])
+        .expect("valid forecast");
+    let mut keep = vec![0u64; events.len().div_ceil(64)];
+    let mut judged = vec![0u64; events.len().div_ceil(64)];
+    (0..iterations)
+        .map(|_| {
+            let start = Instant::now();
+            let counts = view
+                .keep_bitmap(
+                    std::hint::black_box(events),
+                    GateMode::KeepMovingObjects,
+                    &mut keep,
+                    &mut judged,
+                )
+                .expect("bitmaps sized for the batch");
+            std::hint::black_box(counts);
+            start.elapsed().as_secs_f64() * 1e6
+        })
+        .collect()
+}
+
+fn percentile(values: &[f64], quantile: f64) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let index = ((sorted.len() as f64 * quantile).ceil() as usize).clamp(1, sorted.len()) - 1;
+    sorted[index]
+}
+
+fn summary(values: &[f64]) -> serde_json::Value {
+    json!({
+        "p50": percentile(values, 0.5),
+        "p99": percentile(values, 0.99),
+        "p99.9": percentile(values, 0.999),
+        "max": percentile(values, 1.0),
+        "samples": values.len(),
+    })
+}
+
+/// What the figures were measured on.
+fn machine() -> serde_json::Value {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|text| {
+            text.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
+        });
+    json!({
+        "cpu": cpu,
+        "logical-cpus": std::thread::available_parallelism().map(|n| n.get()).ok(),
+    })
+}
