@@ -4,6 +4,7 @@
 mod convert;
 mod eval;
 mod info;
+mod sim;
 
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
@@ -18,6 +19,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Simulate an event camera with ground truth (labelled sequences, benchmark suites).
+    Sim(sim::SimArgs),
     /// Describe an event file: format, sensor, event count, times, rate, polarity, repairs.
     Info(info::InfoArgs),
     /// Convert an event file; the output format follows the extension (.csv, .raw EVT 3.0, .evg).
@@ -36,5 +39,6 @@ fn main() -> anyhow::Result<()> {
         Command::Info(args) => info::run(args),
         Command::Convert(args) => convert::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Sim(args) => sim::run(args),
     }
 }

@@ -1,0 +1,61 @@
+//! Complete simulator configuration: sensor, optics, scene recipe and pixel model.
+
+use evgate_core::SensorSize;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Intrinsics;
+use crate::event_model::EventModel;
+use crate::texture::TextureStyle;
+
+/// The arrangement of the static world and where the camera stands in it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Layout {
+    /// A room seen at eye height: floor, walls, furniture panels; objects fly through it.
+    Room,
+    /// A room with the camera tilted down at the floor; objects slide on the floor.
+    Floor,
+    /// The camera faces a wall at close range; objects pass in front of it.
+    Wall,
+    /// The camera looks down at a table; small objects move on it.
+    Table,
+    /// A street: road, facades, roadside posts; the camera drives forward.
+    Road,
+}
+
+/// The recipe for a random scene: what varies with the seed is drawn within these ranges.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct SceneParams {
+    pub layout: Layout,
+    /// Number of moving objects is drawn uniformly in `min-objects..=max-objects`.
+    pub min_objects: u32,
+    pub max_objects: u32,
+    /// Typical object speed (m/s); each object gets 0.6–1.4× this.
+    pub object_speed_mps: f32,
+    /// Range of object sizes (longest side, metres).
+    pub object_size_m: [f32; 2],
+    /// Share of objects that are flat ellipses instead of boxes.
+    pub flat_object_share: f32,
+    /// Peak angular speed of the camera wobble (rad/s).
+    pub ego_rotation_rad_s: f32,
+    /// Peak speed of the camera's translational wobble (m/s).
+    pub ego_translation_mps: f32,
+    /// Constant forward speed of the camera (m/s), for driving.
+    pub drive_mps: f32,
+    pub world_texture: TextureStyle,
+    pub object_texture: TextureStyle,
+}
+
+/// Everything that determines a simulation besides the seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct SimConfig {
+    /// Name of the preset this configuration started from.
+    pub preset: String,
+    pub sensor: SensorSize,
+    pub intrinsics: Intrinsics,
+    pub scene: SceneParams,
+    #[serde(default)]
+    pub events: EventModel,
+}

@@ -1,0 +1,227 @@
+//! ESIM-style pixel model: each pixel memorises the log intensity at its last event and fires
+//! one event per threshold crossing, timed by linear interpolation between two renders.
+
+use evgate_core::Event;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::event_model::EventModel;
+
+/// An event with the id of the surface that caused it (0 = static world or noise).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LabelledEvent {
+    pub event: Event,
+    pub label: u16,
+}
+
+/// Per-pixel state, row-major.
+#[derive(Clone, Debug)]
+pub struct PixelState {
+    reference: Vec<f32>,
+    previous: Vec<f32>,
+    previous_surface: Vec<u16>,
+    threshold_on: Vec<f32>,
+    threshold_off: Vec<f32>,
+    last_event_us: Vec<i64>,
+}
+
+/// The part of [`PixelState`] belonging to a band of rows, for one worker thread.
+pub struct PixelBand<'a> {
+    first_pixel: usize,
+    width: usize,
+    reference: &'a mut [f32],
+    previous: &'a mut [f32],
+    previous_surface: &'a mut [u16],
+    threshold_on: &'a [f32],
+    threshold_off: &'a [f32],
+    last_event_us: &'a mut [i64],
+}
+
+impl PixelState {
+    /// Starts every pixel at the first rendered frame, with thresholds drawn around the model's
+    /// means (normal mismatch, clamped at `threshold-min`).
+    pub fn new(
+        model: &EventModel,
+        log_intensity: &[f32],
+        surface: &[u16],
+        rng: &mut ChaCha8Rng,
+    ) -> PixelState {
+        let pixels = log_intensity.len();
+        let mut draw = |mean: f32| -> Vec<f32> {
+            (0..pixels)
+                .map(|_| {
+                    (mean + model.threshold_sigma * standard_normal(rng)).max(model.threshold_min)
+                })
+                .collect()
+        };
+        let threshold_on = draw(model.threshold_on);
+        let threshold_off = draw(model.threshold_off);
+        PixelState {
+            reference: log_intensity.to_vec(),
+            previous: log_intensity.to_vec(),
+            previous_surface: surface.to_vec(),
+            threshold_on,
+            threshold_off,
+            last_event_us: vec![i64::MIN / 2; pixels],
+        }
+    }
+
+    /// Splits the state into bands of `rows_per_band` rows.
+    pub fn bands(&mut self, width: usize, rows_per_band: usize) -> Vec<PixelBand<'_>> {
+        let chunk = width * rows_per_band;
+        self.reference
+            .chunks_mut(chunk)
+            .zip(self.previous.chunks_mut(chunk))
+            .zip(self.previous_surface.chunks_mut(chunk))
+            .zip(self.threshold_on.chunks(chunk))
+            .zip(self.threshold_off.chunks(chunk))
+            .zip(self.last_event_us.chunks_mut(chunk))
+            .enumerate()
+            .map(
+                |(
+                    i,
+                    (
+                        ((((reference, previous), previous_surface), threshold_on), threshold_off),
+                        last_event_us,
+                    ),
+                )| PixelBand {
+                    first_pixel: i * chunk,
+                    width,
+                    reference,
+                    previous,
+                    previous_surface,
+                    threshold_on,
+                    threshold_off,
+                    last_event_us,
+                },
+            )
+            .collect()
+    }
+
+    /// Whether pixel `index` may fire at `t_us` (outside its refractory period); if so, records
+    /// the event.
+    pub fn try_fire(&mut self, index: usize, t_us: i64, refractory_us: i64) -> bool {
+        if t_us - self.last_event_us[index] < refractory_us {
+            return false;
+        }
+        self.last_event_us[index] = t_us;
+        true
+    }
+}
+
+impl PixelBand<'_> {
+    /// Compares the band's new render (at `t1_us`) with the previous one (at `t0_us`) and
+    /// appends the events of every threshold crossing. A change between a moving object and
+    /// anything else is attributed to the object (leading and trailing edges alike); between
+    /// two objects, to the one now in front.
+    pub fn emit(
+        &mut self,
+        log_intensity: &[f32],
+        surface: &[u16],
+        t0_us: i64,
+        t1_us: i64,
+        refractory_us: i64,
+        out: &mut Vec<LabelledEvent>,
+    ) {
+        let span = (t1_us - t0_us) as f32;
+        for i in 0..log_intensity.len() {
+            let (l0, l1) = (self.previous[i], log_intensity[i]);
+            let mut reference = self.reference[i];
+            let (on, off) = (self.threshold_on[i], self.threshold_off[i]);
+            if l1 - reference >= on || reference - l1 >= off {
+                let label = if surface[i] != 0 {
+                    surface[i]
+                } else {
+                    self.previous_surface[i]
+                };
+                let pixel = self.first_pixel + i;
+                let (x, y) = ((pixel % self.width) as u16, (pixel / self.width) as u16);
+                let change = l1 - l0;
+                let positive = l1 > reference;
+                let step = if positive { on } else { -off };
+                while (positive && l1 - reference >= on) || (!positive && reference - l1 >= off) {
+                    reference += step;
+                    let fraction = if change.abs() > 1e-9 {
+                        ((reference - l0) / change).clamp(0.0, 1.0)
+                    } else {
+                        1.0
+                    };
+                    let t = (t0_us + (fraction * span).ceil() as i64).clamp(t0_us + 1, t1_us);
+                    if t - self.last_event_us[i] >= refractory_us {
+                        self.last_event_us[i] = t;
+                        out.push(LabelledEvent {
+                            event: Event::new(t, x, y, positive),
+                            label,
+                        });
+                    }
+                }
+                self.reference[i] = reference;
+            }
+            self.previous[i] = l1;
+            self.previous_surface[i] = surface[i];
+        }
+    }
+}
+
+/// A standard normal draw (Box–Muller), avoiding a dependency for one distribution.
+pub fn standard_normal(rng: &mut impl Rng) -> f32 {
+    let u1: f32 = rng.gen_range(f32::EPSILON..1.0);
+    let u2: f32 = rng.gen();
+    (-2.0 * u1.ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn model() -> EventModel {
+        EventModel {
+            threshold_sigma: 0.0,
+            refractory_us: 0,
+            ..EventModel::default()
+        }
+    }
+
+    #[test]
+    fn one_event_per_threshold_crossing_with_interpolated_times() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut state = PixelState::new(&model(), &[0.0, 0.0], &[0, 0], &mut rng);
+        let mut out = Vec::new();
+        let mut bands = state.bands(2, 1);
+        // Pixel 0 brightens by 0.5 log units (two ON events), pixel 1 darkens by 0.25 (one OFF).
+        bands[0].emit(&[0.5, -0.25], &[0, 3], 1000, 2000, 0, &mut out);
+        let times: Vec<(i64, bool, u16)> = out
+            .iter()
+            .map(|e| (e.event.t, e.event.is_on(), e.label))
+            .collect();
+        assert_eq!(
+            times,
+            vec![(1400, true, 0), (1800, true, 0), (1800, false, 3)]
+        );
+    }
+
+    #[test]
+    fn refractory_period_drops_close_events() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let refractory = EventModel {
+            refractory_us: 500,
+            ..model()
+        };
+        let mut state = PixelState::new(&refractory, &[0.0], &[0], &mut rng);
+        let mut out = Vec::new();
+        state.bands(1, 1)[0].emit(&[1.0], &[0], 0, 1000, 500, &mut out);
+        // Crossings at 200, 400, …, 1000 µs; each kept event silences the next 500 µs.
+        let times: Vec<i64> = out.iter().map(|e| e.event.t).collect();
+        assert_eq!(times, vec![200, 800]);
+    }
+
+    #[test]
+    fn trailing_edge_of_an_object_is_labelled_with_the_object() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut state = PixelState::new(&model(), &[0.0], &[2], &mut rng);
+        let mut out = Vec::new();
+        state.bands(1, 1)[0].emit(&[-1.0], &[0], 0, 100, 0, &mut out);
+        assert!(!out.is_empty() && out.iter().all(|e| e.label == 2 && !e.event.is_on()));
+    }
+}

@@ -1,0 +1,195 @@
+//! Smooth, deterministic motion as closed-form functions of time, so a pose can be evaluated at
+//! any instant (the flow and mask ground truth need poses at t + horizon).
+
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::linalg::{Mat3, RigidTransform, Vec3};
+
+/// A sum of sinusoids: smooth motion with curves and accelerations that never repeats exactly
+/// within a sequence.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Wobble {
+    /// (amplitude, angular frequency in rad/s, phase in rad) per term.
+    pub terms: Vec<(f32, f32, f32)>,
+}
+
+impl Wobble {
+    /// `count` terms with frequencies in `[min_hz, max_hz]`; the amplitudes are chosen so that
+    /// the peak speed of the sum is about `peak_speed` (units per second).
+    pub fn random(
+        count: usize,
+        peak_speed: f32,
+        min_hz: f32,
+        max_hz: f32,
+        rng: &mut impl Rng,
+    ) -> Wobble {
+        if count == 0 || peak_speed == 0.0 {
+            return Wobble::default();
+        }
+        let terms = (0..count)
+            .map(|_| {
+                let omega = std::f32::consts::TAU * rng.gen_range(min_hz..=max_hz);
+                let amplitude =
+                    peak_speed / (count as f32).sqrt() / omega * rng.gen_range(0.6..1.4);
+                (amplitude, omega, rng.gen_range(0.0..std::f32::consts::TAU))
+            })
+            .collect();
+        Wobble { terms }
+    }
+
+    pub fn value(&self, t: f32) -> f32 {
+        self.terms
+            .iter()
+            .map(|&(a, w, p)| a * (w * t + p).sin())
+            .sum()
+    }
+}
+
+/// Folds `x` into `[lower, upper]` by reflection: a path that crosses a bound bounces back.
+pub fn bounce(x: f32, lower: f32, upper: f32) -> f32 {
+    let span = upper - lower;
+    if span <= 0.0 {
+        return lower;
+    }
+    let m = (x - lower).rem_euclid(2.0 * span);
+    lower + if m > span { 2.0 * span - m } else { m }
+}
+
+/// Camera motion: a base pose plus rotation-dominated wobble (hand-held or robot-mounted),
+/// small translations that produce parallax, and an optional constant drive velocity.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EgoMotion {
+    pub base_position: Vec3Def,
+    /// Yaw, pitch, roll in radians.
+    pub base_attitude: [f32; 3],
+    pub drive_velocity: Vec3Def,
+    /// Yaw, pitch, roll wobble in radians.
+    pub attitude_wobble: [Wobble; 3],
+    /// x, y, z wobble in metres.
+    pub position_wobble: [Wobble; 3],
+}
+
+impl EgoMotion {
+    /// Camera-to-world pose at `t` seconds.
+    pub fn pose(&self, t: f32) -> RigidTransform {
+        let [yaw, pitch, roll] = self.base_attitude;
+        let rotation = Mat3::from_yaw_pitch_roll(
+            yaw + self.attitude_wobble[0].value(t),
+            pitch + self.attitude_wobble[1].value(t),
+            roll + self.attitude_wobble[2].value(t),
+        );
+        let drive: Vec3 = self.drive_velocity.into();
+        let wobble = Vec3::new(
+            self.position_wobble[0].value(t),
+            self.position_wobble[1].value(t),
+            self.position_wobble[2].value(t),
+        );
+        RigidTransform {
+            rotation,
+            translation: Vec3::from(self.base_position) + drive * t + wobble,
+        }
+    }
+
+    /// How far the drive has carried the camera along z at `t` (objects of a driving scene keep
+    /// their distance relative to it).
+    pub fn drive_offset(&self, t: f32) -> Vec3 {
+        Vec3::from(self.drive_velocity) * t
+    }
+}
+
+/// Path of an independently moving object: a drift with time-warped speed (accelerations and
+/// decelerations) plus curved wobble, bounced inside a box, and a spin about its own axis.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectPath {
+    pub start: Vec3Def,
+    pub velocity: Vec3Def,
+    /// (relative amplitude < 1, angular frequency, phase): speed multiplier 1 + a·cos(ωt + φ).
+    pub speed_modulation: (f32, f32, f32),
+    pub wobble: [Wobble; 3],
+    pub lower: Vec3Def,
+    pub upper: Vec3Def,
+    /// When true the bounce box moves with the camera's drive (traffic around a moving car).
+    pub follows_drive: bool,
+    pub base_rotation: [f32; 3],
+    pub spin_axis: Vec3Def,
+    pub spin_rate: f32,
+    pub spin_wobble: Wobble,
+}
+
+impl ObjectPath {
+    /// Object-to-world pose at `t` seconds; `drive` is the camera's drive offset at `t`.
+    pub fn pose(&self, t: f32, drive: Vec3) -> RigidTransform {
+        let (a, w, p) = self.speed_modulation;
+        // Integral of 1 + a·cos(ωt + φ): the distance travelled at unit speed.
+        let travelled = if w > 0.0 {
+            t + a / w * ((w * t + p).sin() - p.sin())
+        } else {
+            t
+        };
+        let start = Vec3::from(self.start);
+        let velocity = Vec3::from(self.velocity);
+        let (lower, upper) = (Vec3::from(self.lower), Vec3::from(self.upper));
+        let free = |axis: usize| {
+            start.axis(axis) + velocity.axis(axis) * travelled + self.wobble[axis].value(t)
+        };
+        let mut position = Vec3::new(
+            bounce(free(0), lower.x, upper.x),
+            bounce(free(1), lower.y, upper.y),
+            bounce(free(2), lower.z, upper.z),
+        );
+        if self.follows_drive {
+            position = position + drive;
+        }
+        let [yaw, pitch, roll] = self.base_rotation;
+        let spin = self.spin_rate * t + self.spin_wobble.value(t);
+        let rotation = Mat3::from_axis_angle(Vec3::from(self.spin_axis), spin)
+            * Mat3::from_yaw_pitch_roll(yaw, pitch, roll);
+        RigidTransform {
+            rotation,
+            translation: position,
+        }
+    }
+}
+
+/// Serialisable form of [`Vec3`] (`[x, y, z]`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Vec3Def(pub [f32; 3]);
+
+impl From<Vec3Def> for Vec3 {
+    fn from(v: Vec3Def) -> Vec3 {
+        Vec3::new(v.0[0], v.0[1], v.0[2])
+    }
+}
+
+impl From<Vec3> for Vec3Def {
+    fn from(v: Vec3) -> Vec3Def {
+        Vec3Def([v.x, v.y, v.z])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn bounce_reflects_at_both_bounds() {
+        assert_eq!(bounce(0.5, 0.0, 1.0), 0.5);
+        assert!((bounce(1.25, 0.0, 1.0) - 0.75).abs() < 1e-6);
+        assert!((bounce(-0.25, 0.0, 1.0) - 0.25).abs() < 1e-6);
+        assert!((bounce(2.25, 0.0, 1.0) - 0.25).abs() < 1e-6);
+    }
+
+    #[test]
+    fn wobble_peak_speed_is_near_the_request() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let wobble = Wobble::random(3, 2.0, 0.2, 1.0, &mut rng);
+        let dt = 1e-3;
+        let peak = (0..20_000)
+            .map(|i| ((wobble.value(i as f32 * dt + dt) - wobble.value(i as f32 * dt)) / dt).abs())
+            .fold(0.0f32, f32::max);
+        assert!(peak > 0.8 && peak < 5.0, "peak speed {peak}");
+    }
+}

@@ -1,0 +1,446 @@
+//! Ray casting of a scene at one instant: log intensity, surface id and depth per pixel, by
+//! ray–plane and ray–box intersection with a pinhole camera (so camera translation produces
+//! parallax and objects occlude by depth).
+
+use crate::camera::project_world;
+use crate::linalg::{RigidTransform, Vec3};
+use crate::scene::{Scene, Shape};
+
+/// Log intensity of a ray that hits nothing (darker than any lit texel).
+const LOG_DARK: f32 = -6.0;
+
+/// Pixel-aligned buffers of one rendered instant (row-major).
+#[derive(Clone, Debug, Default)]
+pub struct Frame {
+    pub log_intensity: Vec<f32>,
+    /// 0 = static world, k = moving object k.
+    pub surface: Vec<u16>,
+    /// Distance along the optical axis in metres (`f32::INFINITY` where nothing is hit).
+    pub depth: Vec<f32>,
+}
+
+impl Frame {
+    pub fn new(pixels: usize) -> Frame {
+        Frame {
+            log_intensity: vec![0.0; pixels],
+            surface: vec![0; pixels],
+            depth: vec![0.0; pixels],
+        }
+    }
+}
+
+/// What a pixel's ray hit: enough to follow the surface point through time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// 0 = static world, k = moving object k.
+    pub surface: u16,
+    /// The hit point: world coordinates for the static world, object-local coordinates for an
+    /// object (so it can be moved with the object's pose at another time).
+    pub point: Vec3,
+    pub depth: f32,
+    pub log_intensity: f32,
+}
+
+/// Where every surface is at one instant, plus screen-space bounds used to skip rays that
+/// cannot hit a finite surface.
+pub struct Snapshot<'a> {
+    scene: &'a Scene,
+    camera: RigidTransform,
+    objects: Vec<PlacedObject>,
+    panel_bounds: Vec<ScreenBounds>,
+    panel_planes: Vec<PlanePlacement>,
+    all_panels: Vec<usize>,
+    all_objects: Vec<usize>,
+}
+
+/// A panel's plane relative to the camera centre: a ray `t·d` meets it at `t = offset / (n·d)`.
+struct PlanePlacement {
+    normal: Vec3,
+    offset: f32,
+    log_illumination: f32,
+}
+
+struct PlacedObject {
+    pose: RigidTransform,
+    inverse_rotation: crate::linalg::Mat3,
+    bounds: ScreenBounds,
+}
+
+#[derive(Clone, Copy)]
+struct ScreenBounds {
+    x0: f32,
+    x1: f32,
+    y0: f32,
+    y1: f32,
+}
+
+impl ScreenBounds {
+    const EVERYWHERE: ScreenBounds = ScreenBounds {
+        x0: f32::MIN,
+        x1: f32::MAX,
+        y0: f32::MIN,
+        y1: f32::MAX,
+    };
+
+    /// Bounds of the projected points, one pixel wider; everywhere when a point is behind the
+    /// camera (its projection is unbounded).
+    fn of_points(
+        scene: &Scene,
+        camera: &RigidTransform,
+        points: impl Iterator<Item = Vec3>,
+    ) -> ScreenBounds {
+        let mut bounds = ScreenBounds {
+            x0: f32::MAX,
+            x1: f32::MIN,
+            y0: f32::MAX,
+            y1: f32::MIN,
+        };
+        for point in points {
+            let Some((x, y)) = project_world(&scene.intrinsics, camera, point) else {
+                return ScreenBounds::EVERYWHERE;
+            };
+            bounds.x0 = bounds.x0.min(x - 1.0);
+            bounds.x1 = bounds.x1.max(x + 1.0);
+            bounds.y0 = bounds.y0.min(y - 1.0);
+            bounds.y1 = bounds.y1.max(y + 1.0);
+        }
+        bounds
+    }
+
+    fn contains_row(&self, y: f32) -> bool {
+        y >= self.y0 && y <= self.y1
+    }
+
+    fn contains_column(&self, x: f32) -> bool {
+        x >= self.x0 && x <= self.x1
+    }
+}
+
+impl<'a> Snapshot<'a> {
+    pub fn new(scene: &'a Scene, t_s: f32) -> Snapshot<'a> {
+        let camera = scene.ego.pose(t_s);
+        let drive = scene.ego.drive_offset(t_s);
+        let objects = scene
+            .objects
+            .iter()
+            .map(|object| {
+                let pose = object.path.pose(t_s, drive);
+                let corners = object.shape.corners().map(|c| pose.to_world(c));
+                PlacedObject {
+                    pose,
+                    inverse_rotation: pose.rotation.transpose(),
+                    bounds: ScreenBounds::of_points(scene, &camera, corners.into_iter()),
+                }
+            })
+            .collect();
+        let panel_bounds = scene
+            .panels
+            .iter()
+            .map(|panel| match panel.half_extent {
+                None => ScreenBounds::EVERYWHERE,
+                Some((hu, hv)) => {
+                    let corners = [(-hu, -hv), (hu, -hv), (-hu, hv), (hu, hv)]
+                        .map(|(u, v)| panel.origin + panel.axis_u * u + panel.axis_v * v);
+                    ScreenBounds::of_points(scene, &camera, corners.into_iter())
+                }
+            })
+            .collect();
+        let panel_planes = scene
+            .panels
+            .iter()
+            .map(|panel| {
+                let normal = panel.normal();
+                PlanePlacement {
+                    normal,
+                    offset: normal.dot(panel.origin - camera.translation),
+                    log_illumination: log_illumination(scene, normal),
+                }
+            })
+            .collect();
+        Snapshot {
+            scene,
+            camera,
+            panel_planes,
+            all_panels: (0..scene.panels.len()).collect(),
+            all_objects: (0..scene.objects.len()).collect(),
+            objects,
+            panel_bounds,
+        }
+    }
+
+    pub fn camera(&self) -> &RigidTransform {
+        &self.camera
+    }
+
+    /// Pose of object `k` (1-based) at this instant.
+    pub fn object_pose(&self, k: u16) -> &RigidTransform {
+        &self.objects[k as usize - 1].pose
+    }
+
+    /// Renders rows `first_row..first_row + rows` into the given row-major slices.
+    pub fn render_rows(
+        &self,
+        first_row: usize,
+        log_intensity: &mut [f32],
+        surface: &mut [u16],
+        depth: &mut [f32],
+    ) {
+        let width = self.scene.sensor.width as usize;
+        let rows = log_intensity.len() / width;
+        let mut active_panels = Vec::with_capacity(self.panel_bounds.len());
+        let mut active_objects = Vec::with_capacity(self.objects.len());
+        for row in 0..rows {
+            let y = (first_row + row) as f32;
+            active_panels.clear();
+            active_panels.extend(
+                (0..self.panel_bounds.len()).filter(|&i| self.panel_bounds[i].contains_row(y)),
+            );
+            active_objects.clear();
+            active_objects.extend(
+                (0..self.objects.len()).filter(|&i| self.objects[i].bounds.contains_row(y)),
+            );
+            for column in 0..width {
+                let hit = self.trace_filtered(column as f32, y, &active_panels, &active_objects);
+                let i = row * width + column;
+                log_intensity[i] = hit.log_intensity;
+                surface[i] = hit.surface;
+                depth[i] = hit.depth;
+            }
+        }
+    }
+
+    /// What the ray through pixel centre (x, y) hits.
+    pub fn trace(&self, x: f32, y: f32) -> Hit {
+        self.trace_filtered(x, y, &self.all_panels, &self.all_objects)
+    }
+
+    fn trace_filtered(&self, x: f32, y: f32, panels: &[usize], objects: &[usize]) -> Hit {
+        let scene = self.scene;
+        let direction = self.camera.rotation.apply(scene.intrinsics.ray(x, y));
+        let origin = self.camera.translation;
+        let mut best = Hit {
+            surface: 0,
+            point: Vec3::default(),
+            depth: f32::INFINITY,
+            log_intensity: LOG_DARK,
+        };
+        let mut best_panel = None;
+        for &i in panels {
+            if !self.panel_bounds[i].contains_column(x) {
+                continue;
+            }
+            let plane = &self.panel_planes[i];
+            // Parallel rays give an infinite or NaN distance, which fails the comparison.
+            let distance = plane.offset / plane.normal.dot(direction);
+            if !(distance > 1e-3 && distance < best.depth) {
+                continue;
+            }
+            let panel = &scene.panels[i];
+            if let Some((hu, hv)) = panel.half_extent {
+                let relative = origin + direction * distance - panel.origin;
+                if relative.dot(panel.axis_u).abs() > hu || relative.dot(panel.axis_v).abs() > hv {
+                    continue;
+                }
+            }
+            best.depth = distance;
+            best_panel = Some(i);
+        }
+        let mut best_material = best_panel.map(|i| {
+            let panel = &scene.panels[i];
+            best.point = origin + direction * best.depth;
+            let relative = best.point - panel.origin;
+            Material {
+                texture: panel.texture,
+                texel_m: panel.texel_m,
+                u: relative.dot(panel.axis_u),
+                v: relative.dot(panel.axis_v),
+                normal: self.panel_planes[i].normal,
+                log_illumination: self.panel_planes[i].log_illumination,
+            }
+        });
+        for &i in objects {
+            let placed = &self.objects[i];
+            if !placed.bounds.contains_column(x) {
+                continue;
+            }
+            let object = &scene.objects[i];
+            let local_origin = placed
+                .inverse_rotation
+                .apply(origin - placed.pose.translation);
+            let local_direction = placed.inverse_rotation.apply(direction);
+            let Some(local_hit) = intersect_shape(&object.shape, local_origin, local_direction)
+            else {
+                continue;
+            };
+            if local_hit.distance >= best.depth {
+                continue;
+            }
+            best.surface = i as u16 + 1;
+            best.point = local_origin + local_direction * local_hit.distance;
+            best.depth = local_hit.distance;
+            let normal = placed.pose.rotation.apply(local_hit.normal);
+            best_material = Some(Material {
+                texture: object.texture,
+                texel_m: object.texel_m,
+                u: local_hit.u,
+                v: local_hit.v,
+                normal,
+                log_illumination: log_illumination(scene, normal),
+            });
+        }
+        if let Some(material) = best_material {
+            best.log_intensity = self.shade(&material, direction, best.depth);
+        }
+        best
+    }
+
+    fn shade(&self, material: &Material, direction: Vec3, depth: f32) -> f32 {
+        let scene = self.scene;
+        let cos_incidence = (material.normal.dot(direction).abs() / direction.length()).max(0.05);
+        let metres_per_pixel = depth / (scene.intrinsics.fx * cos_incidence);
+        let texture = &scene.textures[material.texture];
+        let inv_texel = 1.0 / material.texel_m;
+        let log_reflectance = texture.sample(
+            material.u * inv_texel,
+            material.v * inv_texel,
+            metres_per_pixel * inv_texel,
+        );
+        log_reflectance + material.log_illumination
+    }
+}
+
+/// Ambient plus Lambertian light on a surface with this normal (both sides lit), as a log.
+fn log_illumination(scene: &Scene, normal: Vec3) -> f32 {
+    let lambert = normal.dot(scene.light).abs();
+    (scene.ambient + (1.0 - scene.ambient) * lambert).ln()
+}
+
+struct Material {
+    texture: usize,
+    texel_m: f32,
+    u: f32,
+    v: f32,
+    normal: Vec3,
+    log_illumination: f32,
+}
+
+struct LocalHit {
+    distance: f32,
+    u: f32,
+    v: f32,
+    normal: Vec3,
+}
+
+fn intersect_shape(shape: &Shape, origin: Vec3, direction: Vec3) -> Option<LocalHit> {
+    match *shape {
+        Shape::Cuboid { half } => intersect_cuboid(half, origin, direction),
+        Shape::Ellipse { half_x, half_y } => {
+            if direction.z.abs() < 1e-9 {
+                return None;
+            }
+            let distance = -origin.z / direction.z;
+            let p = origin + direction * distance;
+            let (nx, ny) = (p.x / half_x, p.y / half_y);
+            (distance > 1e-3 && nx * nx + ny * ny <= 1.0).then_some(LocalHit {
+                distance,
+                u: p.x,
+                v: p.y,
+                normal: Vec3::new(0.0, 0.0, 1.0),
+            })
+        }
+    }
+}
+
+/// Slab test; the texture coordinates of a face are its two in-plane coordinates, shifted per
+/// face so the six faces do not show the same patch.
+fn intersect_cuboid(half: Vec3, origin: Vec3, direction: Vec3) -> Option<LocalHit> {
+    let mut near = f32::MIN;
+    let mut far = f32::MAX;
+    let mut near_axis = 0;
+    for axis in 0..3 {
+        let (o, d, h) = (origin.axis(axis), direction.axis(axis), half.axis(axis));
+        if d.abs() < 1e-12 {
+            if o.abs() > h {
+                return None;
+            }
+            continue;
+        }
+        let inv = 1.0 / d;
+        let (a, b) = ((-h - o) * inv, (h - o) * inv);
+        let (t0, t1) = if a < b { (a, b) } else { (b, a) };
+        if t0 > near {
+            near = t0;
+            near_axis = axis;
+        }
+        far = far.min(t1);
+    }
+    if near > far || near <= 1e-3 {
+        return None;
+    }
+    let p = origin + direction * near;
+    let sign = if direction.axis(near_axis) > 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let mut normal = Vec3::default();
+    let face_offset = (near_axis as f32 * 2.0 + if sign > 0.0 { 1.0 } else { 0.0 }) * 0.73;
+    let (u, v) = match near_axis {
+        0 => {
+            normal.x = sign;
+            (p.z, p.y)
+        }
+        1 => {
+            normal.y = sign;
+            (p.x, p.z)
+        }
+        _ => {
+            normal.z = sign;
+            (p.x, p.y)
+        }
+    };
+    Some(LocalHit {
+        distance: near,
+        u: u + face_offset,
+        v: v + face_offset,
+        normal,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cuboid_hit_from_the_front_reports_front_face() {
+        let hit = intersect_cuboid(
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(0.0, 0.0, -5.0),
+            Vec3::new(0.0, 0.0, 1.0),
+        )
+        .unwrap();
+        assert!((hit.distance - 4.0).abs() < 1e-5);
+        assert_eq!(hit.normal, Vec3::new(0.0, 0.0, -1.0));
+    }
+
+    #[test]
+    fn cuboid_missed_to_the_side() {
+        assert!(intersect_cuboid(
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(2.0, 0.0, -5.0),
+            Vec3::new(0.0, 0.0, 1.0)
+        )
+        .is_none());
+    }
+
+    #[test]
+    fn ellipse_hit_inside_only() {
+        let shape = Shape::Ellipse {
+            half_x: 1.0,
+            half_y: 0.5,
+        };
+        let down = Vec3::new(0.0, 0.0, 1.0);
+        assert!(intersect_shape(&shape, Vec3::new(0.9, 0.0, -1.0), down).is_some());
+        assert!(intersect_shape(&shape, Vec3::new(0.0, 0.6, -1.0), down).is_none());
+    }
+}

@@ -1,0 +1,439 @@
+//! The simulated event camera: renders the scene as often as its motion requires and turns
+//! log-intensity changes into labelled events, incrementally (`advance`) so it can stream in
+//! real time; also answers ground-truth queries (masks, depth, flow) at any time.
+
+use std::collections::VecDeque;
+use std::num::NonZeroUsize;
+
+use evgate_core::SensorSize;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use crate::camera::{project_world, Intrinsics};
+use crate::config::SimConfig;
+use crate::esim::{LabelledEvent, PixelBand, PixelState};
+use crate::noise::NoiseSource;
+use crate::preset::Preset;
+use crate::render::{Frame, Snapshot};
+use crate::scene::Scene;
+use crate::world::build_scene;
+
+/// Rendering probes image motion over this interval to choose the next step.
+const MOTION_PROBE_US: i64 = 1_000;
+/// Spacing of the pixel grid whose static-world points are followed by the motion probe.
+const MOTION_PROBE_GRID_PX: usize = 16;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SimulatorError {
+    #[error(
+        "simulator config: field `events.{field}` = {value} is out of range; accepted: {accepted}"
+    )]
+    BadEventModel {
+        field: &'static str,
+        value: f64,
+        accepted: &'static str,
+    },
+    #[error(
+        "simulator config: sensor size {0} has no pixels; width and height must be at least 1"
+    )]
+    EmptySensor(SensorSize),
+    #[error("simulator config: field `scene.{field}` = {value} is invalid; accepted: {accepted}")]
+    BadScene {
+        field: &'static str,
+        value: String,
+        accepted: &'static str,
+    },
+}
+
+/// Counters of a run so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub struct SimStats {
+    /// Renders used to generate events (not counting ground-truth queries).
+    pub renders: u64,
+    pub events: u64,
+    pub on_events: u64,
+    /// Events caused by moving objects (label > 0).
+    pub object_events: u64,
+    /// Simulated time covered, µs.
+    pub simulated_us: i64,
+}
+
+/// A deterministic (given config and seed) simulated event camera with ground truth.
+pub struct Simulator {
+    config: SimConfig,
+    seed: u64,
+    scene: Scene,
+    rng: ChaCha8Rng,
+    state: PixelState,
+    noise: NoiseSource,
+    frame: Frame,
+    rendered_us: i64,
+    delivered_us: i64,
+    pending: VecDeque<LabelledEvent>,
+    threads: usize,
+    stats: SimStats,
+}
+
+impl Simulator {
+    /// Builds the scene of `preset` for `seed`.
+    pub fn from_preset(preset: Preset, seed: u64) -> Simulator {
+        Simulator::new(preset.config(), seed)
+            .unwrap_or_else(|e| unreachable!("preset {preset} is valid: {e}"))
+    }
+
+    /// Builds a scene from `config` and `seed` and renders it at t = 0.
+    pub fn new(config: SimConfig, seed: u64) -> Result<Simulator, SimulatorError> {
+        if let Some((field, value, accepted)) = config.events.invalid_field() {
+            return Err(SimulatorError::BadEventModel {
+                field,
+                value,
+                accepted,
+            });
+        }
+        if config.sensor.pixels() == 0 {
+            return Err(SimulatorError::EmptySensor(config.sensor));
+        }
+        let scene_params = &config.scene;
+        if scene_params.min_objects > scene_params.max_objects {
+            return Err(SimulatorError::BadScene {
+                field: "min-objects",
+                value: format!(
+                    "{} (max-objects {})",
+                    scene_params.min_objects, scene_params.max_objects
+                ),
+                accepted: "at most max-objects",
+            });
+        }
+        if !(scene_params.object_size_m[0] > 0.0
+            && scene_params.object_size_m[0] <= scene_params.object_size_m[1])
+        {
+            return Err(SimulatorError::BadScene {
+                field: "object-size-m",
+                value: format!("{:?}", scene_params.object_size_m),
+                accepted: "[min, max] with 0 < min <= max",
+            });
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let scene = build_scene(&config, &mut rng);
+        let pixels = config.sensor.pixels();
+        let mut frame = Frame::new(pixels);
+        let threads = std::thread::available_parallelism()
+            .map(NonZeroUsize::get)
+            .unwrap_or(1);
+        render_parallel(
+            &Snapshot::new(&scene, 0.0),
+            &mut frame,
+            config.sensor,
+            threads,
+        );
+        let state = PixelState::new(
+            &config.events,
+            &frame.log_intensity,
+            &frame.surface,
+            &mut rng,
+        );
+        let noise = NoiseSource::new(
+            &config.events,
+            config.sensor.width as usize,
+            pixels,
+            &mut rng,
+        );
+        Ok(Simulator {
+            config,
+            seed,
+            scene,
+            rng,
+            state,
+            noise,
+            frame,
+            rendered_us: 0,
+            delivered_us: 0,
+            pending: VecDeque::new(),
+            threads,
+            stats: SimStats::default(),
+        })
+    }
+
+    /// Limits rendering to `threads` worker threads (at least one).
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
+    }
+
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    pub fn sensor(&self) -> SensorSize {
+        self.config.sensor
+    }
+
+    pub fn intrinsics(&self) -> Intrinsics {
+        self.config.intrinsics
+    }
+
+    /// Number of moving objects in the scene (their ids are 1..=count).
+    pub fn object_count(&self) -> usize {
+        self.scene.objects.len()
+    }
+
+    pub fn stats(&self) -> SimStats {
+        self.stats
+    }
+
+    /// End of the time already delivered by [`Simulator::advance`], µs.
+    pub fn time_us(&self) -> i64 {
+        self.delivered_us
+    }
+
+    /// Appends to `out` the events in `(time_us(), t_end_us]`, in time order. The events do not
+    /// depend on how the time is split into calls.
+    pub fn advance(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
+        while self.rendered_us < t_end_us {
+            self.step();
+        }
+        while let Some(next) = self.pending.front() {
+            if next.event.t > t_end_us {
+                break;
+            }
+            let labelled = *next;
+            self.pending.pop_front();
+            self.stats.events += 1;
+            self.stats.on_events += labelled.event.is_on() as u64;
+            self.stats.object_events += (labelled.label != 0) as u64;
+            out.push(labelled);
+        }
+        self.delivered_us = self.delivered_us.max(t_end_us);
+        self.stats.simulated_us = self.delivered_us;
+    }
+
+    /// One render step, sized by the fastest image motion.
+    fn step(&mut self) {
+        let t0 = self.rendered_us;
+        let t1 = t0 + self.next_step_us(t0);
+        let snapshot = Snapshot::new(&self.scene, t1 as f32 * 1e-6);
+        let width = self.config.sensor.width as usize;
+        let height = self.config.sensor.height as usize;
+        let rows_per_band = height.div_ceil(self.threads);
+        let refractory = self.config.events.refractory_us;
+        let mut events = Vec::new();
+        {
+            let bands = self.state.bands(width, rows_per_band);
+            let chunk = width * rows_per_band;
+            let frame = &mut self.frame;
+            let jobs = frame
+                .log_intensity
+                .chunks_mut(chunk)
+                .zip(frame.surface.chunks_mut(chunk))
+                .zip(frame.depth.chunks_mut(chunk))
+                .zip(bands)
+                .enumerate()
+                .map(|(i, (((log, surface), depth), band))| BandJob {
+                    first_row: i * rows_per_band,
+                    log,
+                    surface,
+                    depth,
+                    band,
+                });
+            let snapshot = &snapshot;
+            let band_events: Vec<Vec<LabelledEvent>> = if self.threads == 1 {
+                jobs.map(|job| job.run(snapshot, t0, t1, refractory))
+                    .collect()
+            } else {
+                std::thread::scope(|scope| {
+                    let handles: Vec<_> = jobs
+                        .map(|job| scope.spawn(move || job.run(snapshot, t0, t1, refractory)))
+                        .collect();
+                    handles
+                        .into_iter()
+                        .map(|handle| {
+                            handle
+                                .join()
+                                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+                        })
+                        .collect()
+                })
+            };
+            for mut band in band_events {
+                events.append(&mut band);
+            }
+        }
+        self.noise
+            .emit(t1, refractory, &mut self.state, &mut self.rng, &mut events);
+        events.sort_by_key(|e| e.event.t);
+        self.pending.extend(events);
+        self.rendered_us = t1;
+        self.stats.renders += 1;
+    }
+
+    /// The step from `t_us` that keeps the largest image displacement of the static world (a
+    /// grid of sample pixels) and of every object's bounding-box corners within `max-step-px`.
+    fn next_step_us(&self, t_us: i64) -> i64 {
+        let model = &self.config.events;
+        let now = Snapshot::new(&self.scene, t_us as f32 * 1e-6);
+        let later = Snapshot::new(&self.scene, (t_us + MOTION_PROBE_US) as f32 * 1e-6);
+        let k = &self.config.intrinsics;
+        let mut max_shift = 0.0f32;
+        let mut consider = |a: Option<(f32, f32)>, b: Option<(f32, f32)>| {
+            if let (Some(a), Some(b)) = (a, b) {
+                max_shift = max_shift.max(((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt());
+            }
+        };
+        let sensor = self.config.sensor;
+        for y in (MOTION_PROBE_GRID_PX / 2..sensor.height as usize).step_by(MOTION_PROBE_GRID_PX) {
+            for x in (MOTION_PROBE_GRID_PX / 2..sensor.width as usize).step_by(MOTION_PROBE_GRID_PX)
+            {
+                let hit = now.trace(x as f32, y as f32);
+                if hit.surface == 0 && hit.depth.is_finite() {
+                    consider(
+                        Some((x as f32, y as f32)),
+                        project_world(k, later.camera(), hit.point),
+                    );
+                }
+            }
+        }
+        for (i, object) in self.scene.objects.iter().enumerate() {
+            let id = i as u16 + 1;
+            for corner in object.shape.corners() {
+                let before = project_world(k, now.camera(), now.object_pose(id).to_world(corner));
+                let after =
+                    project_world(k, later.camera(), later.object_pose(id).to_world(corner));
+                let on_screen = |p: Option<(f32, f32)>| {
+                    p.is_some_and(|(x, y)| {
+                        x > -50.0
+                            && y > -50.0
+                            && x < sensor.width as f32 + 50.0
+                            && y < sensor.height as f32 + 50.0
+                    })
+                };
+                if on_screen(before) || on_screen(after) {
+                    consider(before, after);
+                }
+            }
+        }
+        let speed_px_per_us = max_shift / MOTION_PROBE_US as f32;
+        let step = if speed_px_per_us > 0.0 {
+            (model.max_step_px / speed_px_per_us) as i64
+        } else {
+            model.max_step_us
+        };
+        step.clamp(model.min_step_us, model.max_step_us)
+    }
+
+    /// Renders the scene at `t_us` (log intensity, surface id, depth) without touching the
+    /// event state.
+    pub fn frame_at(&self, t_us: i64) -> Frame {
+        let mut frame = Frame::new(self.config.sensor.pixels());
+        render_parallel(
+            &Snapshot::new(&self.scene, t_us as f32 * 1e-6),
+            &mut frame,
+            self.config.sensor,
+            self.threads,
+        );
+        frame
+    }
+
+    /// Object id per pixel at `t_us` (0 = static world).
+    pub fn mask_at(&self, t_us: i64) -> Vec<u16> {
+        self.frame_at(t_us).surface
+    }
+
+    /// Depth in metres per pixel at `t_us` (`f32::INFINITY` where no surface is hit).
+    pub fn depth_at(&self, t_us: i64) -> Vec<f32> {
+        self.frame_at(t_us).depth
+    }
+
+    /// Forward optical flow (dx, dy) in pixels from `t_us` to `t_us + horizon_us`, defined at
+    /// each pixel at `t_us`: where the surface point seen there projects at the later time
+    /// (whether or not it is visible then). NaN where the point is behind the camera then.
+    pub fn flow(&self, t_us: i64, horizon_us: i64) -> Vec<[f32; 2]> {
+        let sensor = self.config.sensor;
+        let width = sensor.width as usize;
+        let now = Snapshot::new(&self.scene, t_us as f32 * 1e-6);
+        let later = Snapshot::new(&self.scene, (t_us + horizon_us) as f32 * 1e-6);
+        let k = &self.config.intrinsics;
+        let mut flow = vec![[0.0f32; 2]; sensor.pixels()];
+        let rows_per_band = (sensor.height as usize).div_ceil(self.threads);
+        std::thread::scope(|scope| {
+            for (band, rows) in flow.chunks_mut(width * rows_per_band).enumerate() {
+                let (now, later) = (&now, &later);
+                scope.spawn(move || {
+                    for (i, value) in rows.iter_mut().enumerate() {
+                        let (x, y) = (
+                            (i % width) as f32,
+                            (band * rows_per_band + i / width) as f32,
+                        );
+                        let hit = now.trace(x, y);
+                        let world = if hit.surface == 0 {
+                            hit.point
+                        } else {
+                            later.object_pose(hit.surface).to_world(hit.point)
+                        };
+                        *value = match (
+                            hit.depth.is_finite(),
+                            project_world(k, later.camera(), world),
+                        ) {
+                            (true, Some((x1, y1))) => [x1 - x, y1 - y],
+                            (false, _) => [0.0, 0.0],
+                            (true, None) => [f32::NAN, f32::NAN],
+                        };
+                    }
+                });
+            }
+        });
+        flow
+    }
+}
+
+/// One worker's share of a render step: a band of rows, rendered then compared with its state.
+struct BandJob<'a> {
+    first_row: usize,
+    log: &'a mut [f32],
+    surface: &'a mut [u16],
+    depth: &'a mut [f32],
+    band: PixelBand<'a>,
+}
+
+impl BandJob<'_> {
+    fn run(
+        mut self,
+        snapshot: &Snapshot<'_>,
+        t0_us: i64,
+        t1_us: i64,
+        refractory_us: i64,
+    ) -> Vec<LabelledEvent> {
+        let mut out = Vec::new();
+        snapshot.render_rows(self.first_row, self.log, self.surface, self.depth);
+        self.band.emit(
+            self.log,
+            self.surface,
+            t0_us,
+            t1_us,
+            refractory_us,
+            &mut out,
+        );
+        out
+    }
+}
+
+fn render_parallel(snapshot: &Snapshot<'_>, frame: &mut Frame, sensor: SensorSize, threads: usize) {
+    let width = sensor.width as usize;
+    let rows_per_band = (sensor.height as usize).div_ceil(threads.max(1));
+    let chunk = width * rows_per_band;
+    std::thread::scope(|scope| {
+        for (i, ((log, surface), depth)) in frame
+            .log_intensity
+            .chunks_mut(chunk)
+            .zip(frame.surface.chunks_mut(chunk))
+            .zip(frame.depth.chunks_mut(chunk))
+            .enumerate()
+        {
+            scope.spawn(move || snapshot.render_rows(i * rows_per_band, log, surface, depth));
+        }
+    });
+}

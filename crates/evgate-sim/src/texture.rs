@@ -1,0 +1,305 @@
+//! Procedural textures with edges at many scales, stored as mip pyramids so that distant or
+//! slanted surfaces are filtered instead of aliasing (aliasing would make a static scene flicker
+//! and emit spurious events). Texels hold log reflectance: the renderer adds log illumination
+//! instead of taking a logarithm per pixel.
+
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+/// How a texture looks: mean reflectance, contrast and the mix of pattern families.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", default)]
+pub struct TextureStyle {
+    /// Mean reflectance in (0, 1].
+    pub mean: f32,
+    /// Half the peak-to-peak reflectance range, relative to the mean.
+    pub contrast: f32,
+    /// Weight of smooth multi-octave value noise (stains, shading, carpet).
+    pub noise: f32,
+    /// Shapes (rectangles and discs with hard edges) per 32×32-texel cell, summed over scales.
+    pub shape_density: f32,
+    /// Weight of periodic stripes (wood grain, tiles, lane markings).
+    pub stripes: f32,
+}
+
+impl Default for TextureStyle {
+    fn default() -> Self {
+        Self {
+            mean: 0.45,
+            contrast: 0.8,
+            noise: 0.5,
+            shape_density: 1.0,
+            stripes: 0.0,
+        }
+    }
+}
+
+/// A square, tileable log-reflectance texture with its mip levels (level 0 is the finest).
+#[derive(Clone, Debug)]
+pub struct Texture {
+    levels: Vec<Level>,
+}
+
+#[derive(Clone, Debug)]
+struct Level {
+    size: usize,
+    texels: Vec<f32>,
+}
+
+impl Level {
+    fn at(&self, x: i32, y: i32) -> f32 {
+        let mask = self.size as i32 - 1;
+        self.texels[(y & mask) as usize * self.size + (x & mask) as usize]
+    }
+
+    /// Bilinear sample at continuous texel coordinates, wrapping around the edges.
+    fn bilinear(&self, u: f32, v: f32) -> f32 {
+        let x = u - 0.5;
+        let y = v - 0.5;
+        let (ix, iy) = (fast_floor(x), fast_floor(y));
+        let fx = x - ix as f32;
+        let fy = y - iy as f32;
+        let top = self.at(ix, iy) * (1.0 - fx) + self.at(ix + 1, iy) * fx;
+        let bottom = self.at(ix, iy + 1) * (1.0 - fx) + self.at(ix + 1, iy + 1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
+    fn downsampled(&self) -> Level {
+        let size = self.size / 2;
+        let mut texels = vec![0.0; size * size];
+        for y in 0..size {
+            for x in 0..size {
+                let (sx, sy) = (2 * x, 2 * y);
+                let n = self.size;
+                texels[y * size + x] = 0.25
+                    * (self.texels[sy * n + sx]
+                        + self.texels[sy * n + sx + 1]
+                        + self.texels[(sy + 1) * n + sx]
+                        + self.texels[(sy + 1) * n + sx + 1]);
+            }
+        }
+        Level { size, texels }
+    }
+}
+
+impl Texture {
+    /// Builds a texture from level-0 log-reflectance texels (`size` must be a power of two).
+    pub fn from_texels(size: usize, texels: Vec<f32>) -> Texture {
+        assert!(size.is_power_of_two() && texels.len() == size * size);
+        let mut levels = vec![Level { size, texels }];
+        while levels.last().map(|l| l.size).unwrap_or(1) > 1 {
+            let next = levels
+                .last()
+                .map(Level::downsampled)
+                .unwrap_or_else(|| unreachable!());
+            levels.push(next);
+        }
+        Texture { levels }
+    }
+
+    /// Generates a texture of `size`×`size` texels in the given style.
+    pub fn generate(size: usize, style: &TextureStyle, rng: &mut impl Rng) -> Texture {
+        let mut texels = vec![0.0f32; size * size];
+        add_value_noise(&mut texels, size, style.noise, rng);
+        add_shapes(&mut texels, size, style.shape_density, rng);
+        add_stripes(&mut texels, size, style.stripes, rng);
+        normalise(&mut texels, style.mean, style.contrast);
+        for texel in texels.iter_mut() {
+            *texel = texel.ln();
+        }
+        Texture::from_texels(size, texels)
+    }
+
+    /// Side of level 0 in texels.
+    pub fn size(&self) -> usize {
+        self.levels[0].size
+    }
+
+    /// Log reflectance at level-0 texel coordinates (u, v), filtered for a pixel footprint of
+    /// `footprint` texels (trilinear between the two nearest mip levels).
+    pub fn sample(&self, u: f32, v: f32, footprint: f32) -> f32 {
+        if footprint <= 1.0 {
+            return self.levels[0].bilinear(u, v);
+        }
+        let level = approximate_log2(footprint).min((self.levels.len() - 1) as f32);
+        let fine = level.floor() as usize;
+        let blend = level - fine as f32;
+        let scale = 1.0 / (1u32 << fine) as f32;
+        let a = self.levels[fine].bilinear(u * scale, v * scale);
+        if fine + 1 >= self.levels.len() || blend == 0.0 {
+            return a;
+        }
+        let b = self.levels[fine + 1].bilinear(u * scale * 0.5, v * scale * 0.5);
+        a + (b - a) * blend
+    }
+}
+
+/// Floor of `x` as an integer; without SSE4.1 `f32::floor` is a library call, and this runs
+/// eight times per pixel. Values beyond ±2³¹ saturate (texture coordinates never get there).
+fn fast_floor(x: f32) -> i32 {
+    let truncated = x as i32;
+    truncated - ((truncated as f32) > x) as i32
+}
+
+/// Piecewise-linear log2 (exact at powers of two, continuous and monotonic in between): the
+/// mip level only needs to be smooth, not exact.
+fn approximate_log2(x: f32) -> f32 {
+    let bits = x.to_bits();
+    let exponent = ((bits >> 23) & 0xff) as f32 - 127.0;
+    let mantissa = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+    exponent + mantissa - 1.0
+}
+
+/// Smooth noise: random values on coarse grids, interpolated with a smoothstep, octaves halving
+/// in cell size and amplitude.
+fn add_value_noise(texels: &mut [f32], size: usize, weight: f32, rng: &mut impl Rng) {
+    if weight <= 0.0 {
+        return;
+    }
+    let mut cells = 4usize;
+    let mut amplitude = weight;
+    while cells <= size / 2 {
+        let grid: Vec<f32> = (0..cells * cells)
+            .map(|_| rng.gen_range(-1.0..1.0))
+            .collect();
+        let cell = size as f32 / cells as f32;
+        for y in 0..size {
+            let gy = y as f32 / cell;
+            let (y0, fy) = (gy.floor() as usize % cells, smoothstep(gy.fract()));
+            let y1 = (y0 + 1) % cells;
+            for x in 0..size {
+                let gx = x as f32 / cell;
+                let (x0, fx) = (gx.floor() as usize % cells, smoothstep(gx.fract()));
+                let x1 = (x0 + 1) % cells;
+                let top = grid[y0 * cells + x0] * (1.0 - fx) + grid[y0 * cells + x1] * fx;
+                let bottom = grid[y1 * cells + x0] * (1.0 - fx) + grid[y1 * cells + x1] * fx;
+                texels[y * size + x] += amplitude * (top * (1.0 - fy) + bottom * fy);
+            }
+        }
+        cells *= 2;
+        amplitude *= 0.55;
+    }
+}
+
+fn smoothstep(t: f32) -> f32 {
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Hard-edged rectangles and discs from a quarter of the texture down to a few texels, each
+/// with its own grey level and opacity, so edges of every scale and contrast appear.
+fn add_shapes(texels: &mut [f32], size: usize, density: f32, rng: &mut impl Rng) {
+    if density <= 0.0 {
+        return;
+    }
+    let mut extent = size / 4;
+    while extent >= 3 {
+        let cells = (size as f32 / 32.0).powi(2);
+        let count = (density * cells * (32.0 / extent as f32).min(4.0) / 3.0).ceil() as usize;
+        for _ in 0..count {
+            let w = rng.gen_range(extent / 2..=extent) as i64;
+            let h = rng.gen_range(extent / 2..=extent) as i64;
+            let cx = rng.gen_range(0..size) as i64;
+            let cy = rng.gen_range(0..size) as i64;
+            let value: f32 = rng.gen_range(-1.2..1.2);
+            let opacity: f32 = rng.gen_range(0.3..1.0);
+            let disc = rng.gen_bool(0.4);
+            for dy in -h / 2..=h / 2 {
+                for dx in -w / 2..=w / 2 {
+                    if disc {
+                        let (nx, ny) = (dx as f32 / (w as f32 / 2.0), dy as f32 / (h as f32 / 2.0));
+                        if nx * nx + ny * ny > 1.0 {
+                            continue;
+                        }
+                    }
+                    let x = (cx + dx).rem_euclid(size as i64) as usize;
+                    let y = (cy + dy).rem_euclid(size as i64) as usize;
+                    let texel = &mut texels[y * size + x];
+                    *texel += (value - *texel) * opacity;
+                }
+            }
+        }
+        extent /= 2;
+    }
+}
+
+/// Periodic square-wave stripes with a random period and orientation that tile seamlessly.
+fn add_stripes(texels: &mut [f32], size: usize, weight: f32, rng: &mut impl Rng) {
+    if weight <= 0.0 {
+        return;
+    }
+    // Integer wave numbers along both axes keep the pattern tileable.
+    let kx = rng.gen_range(0..6) as f32;
+    let ky = rng.gen_range(1..10) as f32;
+    let duty: f32 = rng.gen_range(0.2..0.6);
+    for y in 0..size {
+        for x in 0..size {
+            let phase = (kx * x as f32 + ky * y as f32) / size as f32;
+            let stripe = if phase.fract() < duty { 1.0 } else { -1.0 };
+            texels[y * size + x] += weight * stripe;
+        }
+    }
+}
+
+/// Maps texel values linearly to `mean ± mean·contrast`, clamped to a positive reflectance.
+fn normalise(texels: &mut [f32], mean: f32, contrast: f32) {
+    let (lo, hi) = texels
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let centre = texels.iter().sum::<f32>() / texels.len() as f32;
+    let half_range = (hi - centre).max(centre - lo).max(1e-6);
+    for texel in texels.iter_mut() {
+        let unit = (*texel - centre) / half_range;
+        *texel = (mean * (1.0 + contrast * unit)).clamp(0.01, 1.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn generated_texture_has_contrast_and_stays_in_range() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let texture = Texture::generate(64, &TextureStyle::default(), &mut rng);
+        let samples: Vec<f32> = (0..64)
+            .map(|i| texture.sample(i as f32 + 0.5, 10.5, 1.0).exp())
+            .collect();
+        let lo = samples.iter().cloned().fold(f32::MAX, f32::min);
+        let hi = samples.iter().cloned().fold(f32::MIN, f32::max);
+        assert!(lo >= 0.0099 && hi <= 1.0001);
+        assert!(
+            hi - lo > 0.1,
+            "a row of the texture is almost flat: {lo}..{hi}"
+        );
+    }
+
+    #[test]
+    fn coarse_levels_average_the_texture() {
+        let texels: Vec<f32> = (0..16)
+            .map(|i| if i % 2 == 0 { 0.2 } else { 0.6 })
+            .collect();
+        let texture = Texture::from_texels(4, texels);
+        assert!((texture.sample(1.3, 2.7, 4.0) - 0.4).abs() < 1e-5);
+        assert!((texture.sample(1.3, 2.7, 1e6) - 0.4).abs() < 1e-5);
+    }
+
+    #[test]
+    fn fast_helpers_match_the_library() {
+        for x in [-3.5f32, -1.0, -0.25, 0.0, 0.75, 2.0, 1e6] {
+            assert_eq!(fast_floor(x), x.floor() as i32, "{x}");
+        }
+        for x in [1.0f32, 2.0, 8.0, 1024.0] {
+            assert_eq!(approximate_log2(x), x.log2());
+        }
+        assert!((approximate_log2(3.0) - 3f32.log2()).abs() < 0.1);
+    }
+
+    #[test]
+    fn sampling_wraps_around() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let texture = Texture::generate(32, &TextureStyle::default(), &mut rng);
+        assert!((texture.sample(3.5, 7.25, 1.0) - texture.sample(35.5, -24.75, 1.0)).abs() < 1e-5);
+    }
+}
