@@ -217,7 +217,8 @@ fn sigint_stops_the_service_cleanly_with_its_stats() {
     );
     let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     assert_eq!(report["windows-closed"], 0, "{report}");
-    assert_eq!(report["model-size"], "S", "{report}");
+    assert_eq!(report["model"].as_str(), model_path().to_str(), "{report}");
+    assert!(report["inference"]["count"] == 0, "{report}");
 }
 
 #[test]
