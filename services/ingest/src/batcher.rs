@@ -2,7 +2,7 @@
 
 use evgate_core::Event;
 
-use crate::source::{Chunk, EventSource};
+use crate::source::{Chunk, EventSource, SourceError};
 
 /// How batches are cut.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,17 +58,20 @@ impl Batcher {
 
     /// The next batch, pulling from `source` as needed; `None` once the source is exhausted
     /// and everything was handed out.
-    pub fn next_batch<'a>(&'a mut self, source: &mut dyn EventSource) -> Option<Batch<'a>> {
+    pub fn next_batch<'a>(
+        &'a mut self,
+        source: &mut dyn EventSource,
+    ) -> Result<Option<Batch<'a>>, SourceError> {
         self.compact();
         while !self.exhausted && !self.batch_ready() {
-            match source.next_chunk(&mut self.pending_events, &mut self.pending_labels) {
+            match source.next_chunk(&mut self.pending_events, &mut self.pending_labels)? {
                 Chunk::Events { watermark_us } => self.watermark_us = watermark_us,
                 Chunk::End => self.exhausted = true,
             }
         }
         let available = self.pending_events.len() - self.consumed;
         if available == 0 && self.exhausted {
-            return None;
+            return Ok(None);
         }
         let first_t = self.pending_events[self.consumed].t;
         let (count, t_begin_us, t_end_us) = match self.size {
@@ -95,13 +98,13 @@ impl Batcher {
         } else {
             &[]
         };
-        Some(Batch {
+        Ok(Some(Batch {
             events: &self.pending_events[range],
             labels,
             t_begin_us,
             t_end_us,
             last: self.exhausted && self.consumed == self.pending_events.len(),
-        })
+        }))
     }
 
     fn batch_ready(&self) -> bool {
@@ -148,27 +151,33 @@ mod tests {
         fn has_labels(&self) -> bool {
             true
         }
-        fn next_chunk(&mut self, events: &mut Vec<Event>, labels: &mut Vec<u16>) -> Chunk {
+        fn next_chunk(
+            &mut self,
+            events: &mut Vec<Event>,
+            labels: &mut Vec<u16>,
+        ) -> Result<Chunk, SourceError> {
             if self.chunks.is_empty() {
-                return Chunk::End;
+                return Ok(Chunk::End);
             }
             let times = self.chunks.remove(0);
             for &t in &times {
                 events.push(Event::new(t, 0, 0, true));
                 labels.push(t as u16);
             }
-            Chunk::Events {
+            Ok(Chunk::Events {
                 watermark_us: *times.last().unwrap(),
-            }
+            })
         }
-        fn restart(&mut self, _pass: i64) {}
+        fn restart(&mut self, _pass: i64) -> Result<(), SourceError> {
+            Ok(())
+        }
     }
 
     fn collect(size: BatchSize, chunks: Vec<Vec<i64>>) -> Vec<(Vec<i64>, i64, i64, bool)> {
         let mut source = Scripted { chunks };
         let mut batcher = Batcher::new(size);
         let mut out = Vec::new();
-        while let Some(batch) = batcher.next_batch(&mut source) {
+        while let Some(batch) = batcher.next_batch(&mut source).unwrap() {
             assert_eq!(batch.events.len(), batch.labels.len());
             out.push((
                 batch.events.iter().map(|e| e.t).collect(),

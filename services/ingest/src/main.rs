@@ -25,7 +25,7 @@ use tracing_subscriber::EnvFilter;
 
 use batcher::{BatchSize, Batcher};
 use pacing::Pacer;
-use source::{EventSource, InMemory, SimulatedCamera};
+use source::{EventSource, InMemory, Recording, SimulatedCamera};
 
 /// Publish events into an evgate pipeline over shared memory.
 #[derive(Parser, Debug)]
@@ -37,8 +37,9 @@ struct Args {
     /// Camera name within the domain: the second part of every service name.
     #[arg(long, default_value = "cam0")]
     camera: String,
-    /// Event file to publish (a labelled-sequence .npz, published with its labels). Without it,
-    /// the built-in simulated camera is used.
+    /// Event file to publish: any format evgate-io decodes (EVT 2.0/3.0 RAW, DAT, AEDAT 4, CSV,
+    /// .evg, EVIMO .npz), or a labelled-sequence .npz, published with its labels. Without it, the
+    /// built-in simulated camera is used.
     #[arg(long)]
     input: Option<PathBuf>,
     /// Scene of the simulated camera: boxes, floor, wall, table, fast, tabletop or driving.
@@ -156,8 +157,15 @@ fn validate(args: &Args) -> anyhow::Result<()> {
 
 fn open_source(args: &Args) -> anyhow::Result<(Box<dyn EventSource>, String)> {
     match &args.input {
-        Some(path) => {
+        Some(path) if is_labelled_sequence(path) => {
             let source = InMemory::labelled_sequence(path)?;
+            Ok((
+                Box::new(source),
+                format!("{} (labelled sequence)", path.display()),
+            ))
+        }
+        Some(path) => {
+            let source = Recording::open(path)?;
             Ok((Box::new(source), path.display().to_string()))
         }
         None => {
@@ -173,6 +181,15 @@ fn open_source(args: &Args) -> anyhow::Result<(Box<dyn EventSource>, String)> {
             ))
         }
     }
+}
+
+/// A labelled-sequence `.npz` carries per-event labels (`events_label`); other `.npz` files
+/// (EVIMO recordings) go to the decoders.
+fn is_labelled_sequence(path: &std::path::Path) -> bool {
+    path.extension().is_some_and(|ext| ext == "npz")
+        && evgate_io::npz::NpzReader::open(path)
+            .map(|archive| archive.contains("events_label"))
+            .unwrap_or(false)
 }
 
 /// An id that differs between runs, so readers notice a restarted ingest.
@@ -243,10 +260,10 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
     let started = Instant::now();
     let mut ended_by = "end-of-stream";
     loop {
-        let Some(batch) = batcher.next_batch(source.as_mut()) else {
+        let Some(batch) = batcher.next_batch(source.as_mut())? else {
             if args.repeat {
                 totals.passes += 1;
-                source.restart(totals.passes);
+                source.restart(totals.passes)?;
                 batcher.resume();
                 restarted = true;
                 continue;

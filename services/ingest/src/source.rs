@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use evgate_core::{Event, SensorSize};
-use evgate_io::LabelledSequence;
+use evgate_io::{EventReader, LabelledSequence};
 use evgate_sim::{LabelledEvent, Preset, Simulator};
 
 /// Source failures.
@@ -14,6 +14,8 @@ pub enum SourceError {
     Sequence { path: PathBuf, reason: String },
     #[error("input {path} has no events")]
     Empty { path: PathBuf },
+    #[error(transparent)]
+    Decode(#[from] evgate_io::DecodeError),
 }
 
 /// A chunk appended by [`EventSource::next_chunk`].
@@ -30,10 +32,14 @@ pub trait EventSource {
     /// True when the source knows which object caused each event.
     fn has_labels(&self) -> bool;
     /// Appends the next chunk of events (and labels, when known) to the buffers.
-    fn next_chunk(&mut self, events: &mut Vec<Event>, labels: &mut Vec<u16>) -> Chunk;
+    fn next_chunk(
+        &mut self,
+        events: &mut Vec<Event>,
+        labels: &mut Vec<u16>,
+    ) -> Result<Chunk, SourceError>;
     /// Starts pass number `pass` (1 for the first repetition) over from the first event, shifted
     /// by `pass` times the source's span so stream time keeps increasing across loops.
-    fn restart(&mut self, pass: i64);
+    fn restart(&mut self, pass: i64) -> Result<(), SourceError>;
 }
 
 /// The built-in simulated camera, generating events incrementally for `duration_us`.
@@ -79,10 +85,14 @@ impl EventSource for SimulatedCamera {
         true
     }
 
-    fn next_chunk(&mut self, events: &mut Vec<Event>, labels: &mut Vec<u16>) -> Chunk {
+    fn next_chunk(
+        &mut self,
+        events: &mut Vec<Event>,
+        labels: &mut Vec<u16>,
+    ) -> Result<Chunk, SourceError> {
         let now = self.simulator.time_us();
         if now >= self.duration_us {
-            return Chunk::End;
+            return Ok(Chunk::End);
         }
         let until = (now + self.step_us).min(self.duration_us);
         self.scratch.clear();
@@ -94,17 +104,18 @@ impl EventSource for SimulatedCamera {
             labels.push(labelled.label);
         }
         // `advance` delivered every event up to `until` inclusive.
-        Chunk::Events {
+        Ok(Chunk::Events {
             watermark_us: until + 1 + self.offset_us,
-        }
+        })
     }
 
-    fn restart(&mut self, pass: i64) {
+    fn restart(&mut self, pass: i64) -> Result<(), SourceError> {
         let threads = self.threads;
         self.simulator = Simulator::from_preset(self.preset, self.seed);
         self.simulator.set_threads(threads);
         // One pass delivers the events of (0, duration].
         self.offset_us = pass * self.duration_us;
+        Ok(())
     }
 }
 
@@ -159,9 +170,13 @@ impl EventSource for InMemory {
         self.labels.is_some()
     }
 
-    fn next_chunk(&mut self, events: &mut Vec<Event>, labels: &mut Vec<u16>) -> Chunk {
+    fn next_chunk(
+        &mut self,
+        events: &mut Vec<Event>,
+        labels: &mut Vec<u16>,
+    ) -> Result<Chunk, SourceError> {
         if self.next >= self.events.len() {
-            return Chunk::End;
+            return Ok(Chunk::End);
         }
         let end = (self.next + IN_MEMORY_CHUNK).min(self.events.len());
         let offset = self.offset_us;
@@ -174,13 +189,85 @@ impl EventSource for InMemory {
         }
         self.next = end;
         // Files are in time order, so nothing later is older than the last event handed out.
-        Chunk::Events {
+        Ok(Chunk::Events {
             watermark_us: self.events[end - 1].t + offset,
-        }
+        })
     }
 
-    fn restart(&mut self, pass: i64) {
+    fn restart(&mut self, pass: i64) -> Result<(), SourceError> {
         self.next = 0;
         self.offset_us = pass * self.span_us();
+        Ok(())
+    }
+}
+
+/// An event file of any format evgate-io decodes, streamed chunk by chunk (no labels).
+pub struct Recording {
+    path: PathBuf,
+    reader: Box<dyn EventReader>,
+    chunk: Vec<Event>,
+    offset_us: i64,
+    /// First and last event time of the first pass: the span a loop shifts by.
+    first_t: Option<i64>,
+    last_t: i64,
+    span_us: Option<i64>,
+}
+
+impl Recording {
+    pub fn open(path: &Path) -> Result<Self, SourceError> {
+        Ok(Self {
+            path: path.to_owned(),
+            reader: evgate_io::open(path)?,
+            chunk: Vec::new(),
+            offset_us: 0,
+            first_t: None,
+            last_t: 0,
+            span_us: None,
+        })
+    }
+}
+
+impl EventSource for Recording {
+    fn sensor(&self) -> SensorSize {
+        self.reader.sensor_size()
+    }
+
+    fn has_labels(&self) -> bool {
+        false
+    }
+
+    fn next_chunk(
+        &mut self,
+        events: &mut Vec<Event>,
+        _labels: &mut Vec<u16>,
+    ) -> Result<Chunk, SourceError> {
+        if self.reader.read_chunk(&mut self.chunk)? == 0 {
+            if self.first_t.is_none() {
+                return Err(SourceError::Empty {
+                    path: self.path.clone(),
+                });
+            }
+            return Ok(Chunk::End);
+        }
+        self.first_t.get_or_insert(self.chunk[0].t);
+        self.last_t = self.chunk[self.chunk.len() - 1].t;
+        let offset = self.offset_us;
+        events.extend(self.chunk.iter().map(|event| Event {
+            t: event.t + offset,
+            ..*event
+        }));
+        // Decoders deliver events in time order (repairs are reported, not passed on).
+        Ok(Chunk::Events {
+            watermark_us: self.last_t + offset,
+        })
+    }
+
+    fn restart(&mut self, pass: i64) -> Result<(), SourceError> {
+        let span = *self
+            .span_us
+            .get_or_insert(self.last_t - self.first_t.unwrap_or(self.last_t) + 1);
+        self.reader = evgate_io::open(&self.path)?;
+        self.offset_us = pass * span;
+        Ok(())
     }
 }

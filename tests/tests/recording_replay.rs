@@ -1,0 +1,62 @@
+//! A real recording replayed by evgate-ingest reaches the gate event for event, in real time.
+
+use std::time::Duration;
+
+use evgate_e2e::{binary, u64_at, unique_names, workspace_root, Process};
+
+const TIMEOUT: Duration = Duration::from_secs(90);
+
+#[test]
+fn a_real_evt3_recording_reaches_the_gate_event_for_event_at_its_own_pace() {
+    let recording = workspace_root().join("../shared/data/real/evt3_sample.raw");
+    let mut reader = evgate_io::open(&recording).expect("the shared EVT 3.0 sample decodes");
+    let decoded = evgate_io::read_all(reader.as_mut()).expect("the shared EVT 3.0 sample decodes");
+    let span_s = (decoded.last().unwrap().t - decoded[0].t) as f64 * 1e-6;
+
+    let names = unique_names("replay");
+    let mut gate = Process::start(
+        &binary("evgate-gate", "evgate-gate").unwrap(),
+        &[
+            "--domain",
+            &names.domain,
+            "--camera",
+            &names.camera,
+            "--json",
+            "--exit-at-end-of-stream",
+        ],
+    )
+    .unwrap();
+    let mut ingest = Process::start(
+        &binary("evgate-ingest", "evgate-ingest").unwrap(),
+        &[
+            "--domain",
+            &names.domain,
+            "--camera",
+            &names.camera,
+            "--json",
+            "--input",
+            recording.to_str().unwrap(),
+            "--wait-for-subscribers",
+            "1",
+        ],
+    )
+    .unwrap();
+    let ingest_summary = ingest.summary(TIMEOUT).unwrap();
+    let gate_summary = gate.summary(TIMEOUT).unwrap();
+    assert_eq!(
+        u64_at(&ingest_summary, "/events-published"),
+        decoded.len() as u64
+    );
+    assert_eq!(u64_at(&ingest_summary, "/sensor-width"), 1280);
+    assert_eq!(
+        u64_at(&gate_summary, "/stats/input-events"),
+        decoded.len() as u64
+    );
+    assert_eq!(gate_summary["balanced"], true);
+    // Paced by the timestamps: publishing took at least the recording's span.
+    let wall_s = ingest_summary["wall-s"].as_f64().unwrap();
+    assert!(
+        wall_s >= span_s * 0.9,
+        "published {span_s:.3} s of events in {wall_s:.3} s"
+    );
+}
