@@ -44,7 +44,8 @@ impl RunMode {
 /// Arguments of `evgate run`.
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
-    /// Recording to replay (a labelled-sequence .npz); without it, the built-in simulated camera.
+    /// Recording to replay: any format evgate-io decodes, or a labelled-sequence .npz (then
+    /// scored against its labels); without it, the built-in simulated camera.
     #[arg(long)]
     input: Option<PathBuf>,
     /// Scene of the simulated camera: boxes, floor, wall, table, fast, tabletop or driving.
