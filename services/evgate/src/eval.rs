@@ -14,6 +14,22 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 /// The committed model, evaluated when no `--model` is given.
 const DEFAULT_MODEL: &str = "models/evgate-S.onnx";
+/// Where the training code's FLOP counter writes its table.
+const DEFAULT_FLOPS_TABLE: &str = "models/training/runs/flops.json";
+
+/// The table of `python -m evgate_train.flops`.
+#[derive(serde::Deserialize)]
+struct FlopsTable {
+    models: Vec<FlopsRow>,
+}
+
+#[derive(serde::Deserialize)]
+struct FlopsRow {
+    size: String,
+    /// The paper counts every method at 640×480.
+    #[serde(rename = "gflops-640x480")]
+    gflops_640x480: f64,
+}
 
 /// Evaluate forecasts and baselines on labelled sequences and write a report.
 #[derive(Args)]
@@ -58,6 +74,10 @@ pub struct EvalArgs {
     /// ONNX Runtime threads per operator.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// Per-size GFLOPs of the network (the JSON of `python -m evgate_train.flops`) for the
+    /// runtime table; default: models/training/runs/flops.json when it exists.
+    #[arg(long)]
+    pub model_flops: Option<PathBuf>,
     /// Print the overall summary as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -161,7 +181,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
 
-    let report = evaluation.finish(split)?;
+    let mut report = evaluation.finish(split)?;
+    let flops_path = args.model_flops.clone().or_else(|| {
+        let default = PathBuf::from(DEFAULT_FLOPS_TABLE);
+        default.is_file().then_some(default)
+    });
+    if let Some(path) = flops_path {
+        fill_model_gflops(&mut report, &path)?;
+    }
     let written = write_report(&report, &args.report)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report.overall)?);
@@ -172,6 +199,29 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         for plot in &written.plots {
             println!("wrote {}", plot.display());
         }
+    }
+    Ok(())
+}
+
+/// Sets the GFLOPs of every model method from the training code's FLOP table.
+fn fill_model_gflops(report: &mut Report, path: &Path) -> anyhow::Result<()> {
+    let text = fs::read_to_string(path)
+        .with_context(|| format!("cannot read FLOP table {}", path.display()))?;
+    let table: FlopsTable = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "FLOP table {}: expected {{\"models\": [{{\"size\", \"gflops-640x480\"}}]}}",
+            path.display()
+        )
+    })?;
+    for method in &mut report.methods {
+        let Some(size) = method.model.as_ref().map(|m| m.size.clone()) else {
+            continue;
+        };
+        method.gflops = table
+            .models
+            .iter()
+            .find(|row| row.size == size)
+            .map(|row| row.gflops_640x480);
     }
     Ok(())
 }
