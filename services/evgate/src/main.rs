@@ -4,6 +4,7 @@
 mod convert;
 mod eval;
 mod info;
+mod render;
 mod sim;
 
 use clap::{Parser, Subcommand};
@@ -21,6 +22,8 @@ struct Cli {
 enum Command {
     /// Simulate an event camera with ground truth (labelled sequences, benchmark suites).
     Sim(sim::SimArgs),
+    /// Draw an event file (with labels, mask outlines or a suppressed stream) as PNGs or a GIF.
+    Render(render::RenderArgs),
     /// Describe an event file: format, sensor, event count, times, rate, polarity, repairs.
     Info(info::InfoArgs),
     /// Convert an event file; the output format follows the extension (.csv, .raw EVT 3.0, .evg).
@@ -40,5 +43,6 @@ fn main() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Sim(args) => sim::run(args),
+        Command::Render(args) => render::run(args),
     }
 }

@@ -7,13 +7,47 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use evgate_sim::sequence::SequenceReport;
-use evgate_sim::{simulate_sequence, Preset, SequenceOptions, SimConfig};
+use evgate_sim::{
+    simulate_sequence, suite_plan, Preset, SequenceOptions, SimConfig, SuiteEntry, SuiteScale,
+    SUITE_VERSION,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
-/// Simulate an event camera with ground truth and write `sequence.npz`.
+/// Simulate an event camera with ground truth and write `events.evg`, `sequence.npz` and
+/// `summary.json`; `evgate sim suite` generates the whole benchmark suite.
 #[derive(Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct SimArgs {
+    #[command(subcommand)]
+    pub command: Option<SimCommand>,
+    #[command(flatten)]
+    pub sequence: SequenceArgs,
+}
+
+#[derive(clap::Subcommand)]
+pub enum SimCommand {
+    /// Generate the versioned train/val/test benchmark suite with a manifest (seeds,
+    /// parameters, event counts, SHA-256 of every file).
+    Suite(SuiteArgs),
+}
+
+#[derive(Args)]
+pub struct SuiteArgs {
+    /// Output directory; sequences go to <OUT>/<split>/<preset>-<seed>/, the manifest to
+    /// <OUT>/manifest.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Suite size: small (78 simulated seconds, for quick training runs) or full (390 s).
+    #[arg(long, default_value = "small")]
+    pub scale: SuiteScale,
+    /// Print the manifest totals as JSON on stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Args)]
+pub struct SequenceArgs {
     /// Scene preset: boxes, floor, wall, table, fast, tabletop (346×260) or driving (640×480).
     #[arg(long, default_value = "boxes")]
     pub preset: Preset,
@@ -56,6 +90,13 @@ pub struct SequenceSummary {
 }
 
 pub fn run(args: SimArgs) -> anyhow::Result<()> {
+    match args.command {
+        Some(SimCommand::Suite(suite)) => run_suite(suite),
+        None => run_sequence(args.sequence),
+    }
+}
+
+fn run_sequence(args: SequenceArgs) -> anyhow::Result<()> {
     let out = args.out.context("--out is required")?;
     let config = match &args.config {
         Some(path) => load_config(path)?,
@@ -168,4 +209,148 @@ pub fn progress_bar(length: i64, message: &str) -> ProgressBar {
     );
     bar.set_message(message.to_string());
     bar
+}
+
+/// One file of the suite with its size and SHA-256.
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct ManifestFile {
+    path: PathBuf,
+    bytes: u64,
+    sha256: String,
+}
+
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct ManifestEntry {
+    #[serde(flatten)]
+    plan: SuiteEntry,
+    events: u64,
+    object_event_share: f64,
+    on_event_share: f64,
+    object_count: usize,
+    renders: u64,
+    wall_s: f64,
+    files: Vec<ManifestFile>,
+    /// The complete simulator configuration of the sequence.
+    config: SimConfig,
+}
+
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct SuiteTotals {
+    sequences: usize,
+    simulated_s: f64,
+    events: u64,
+    bytes: u64,
+    wall_s: f64,
+}
+
+#[derive(Serialize)]
+#[serde(rename_all = "kebab-case")]
+struct Manifest {
+    version: &'static str,
+    generator: String,
+    scale: SuiteScale,
+    totals: SuiteTotals,
+    sequences: Vec<ManifestEntry>,
+}
+
+fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
+    let plan = suite_plan(args.scale);
+    let total_us: i64 = plan.iter().map(|e| e.duration_us + e.duration_us / 4).sum();
+    let bar = progress_bar(
+        total_us,
+        &format!("suite {} ({} sequences)", args.scale, plan.len()),
+    );
+    let started = std::time::Instant::now();
+    let mut entries = Vec::with_capacity(plan.len());
+    let mut done_before = 0i64;
+    for entry in plan {
+        bar.set_message(entry.name.clone());
+        let dir = args.out.join(&entry.name);
+        fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let config = entry.preset.config();
+        let options = SequenceOptions {
+            duration_us: entry.duration_us,
+            ..SequenceOptions::default()
+        };
+        let summary = write_sequence(&config, entry.seed, &options, &dir, &mut |done, _| {
+            bar.set_position((done_before + done) as u64);
+        })?;
+        done_before += entry.duration_us + entry.duration_us / 4;
+        let files = summary
+            .files
+            .iter()
+            .map(|path| describe_file(path, &args.out))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        entries.push(ManifestEntry {
+            plan: entry,
+            events: summary.events,
+            object_event_share: summary.object_event_share,
+            on_event_share: summary.on_event_share,
+            object_count: summary.object_count,
+            renders: summary.renders,
+            wall_s: summary.wall_s,
+            files,
+            config,
+        });
+    }
+    bar.finish_and_clear();
+    let totals = SuiteTotals {
+        sequences: entries.len(),
+        simulated_s: entries
+            .iter()
+            .map(|e| e.plan.duration_us as f64 * 1e-6)
+            .sum(),
+        events: entries.iter().map(|e| e.events).sum(),
+        bytes: entries
+            .iter()
+            .flat_map(|e| e.files.iter().map(|f| f.bytes))
+            .sum(),
+        wall_s: started.elapsed().as_secs_f64(),
+    };
+    let manifest = Manifest {
+        version: SUITE_VERSION,
+        generator: format!("evgate {}", env!("CARGO_PKG_VERSION")),
+        scale: args.scale,
+        totals,
+        sequences: entries,
+    };
+    let path = args.out.join("manifest.json");
+    fs::write(&path, serde_json::to_string_pretty(&manifest)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    let totals = &manifest.totals;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(totals)?);
+    } else {
+        println!(
+            "suite {} ({}): {} sequences, {:.1} simulated s, {} events, {:.1} MB, generated in {:.1} s; manifest {}",
+            SUITE_VERSION,
+            args.scale,
+            totals.sequences,
+            totals.simulated_s,
+            totals.events,
+            totals.bytes as f64 / 1e6,
+            totals.wall_s,
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// Size and SHA-256 of a generated file, its path relative to the suite root.
+fn describe_file(path: &Path, root: &Path) -> anyhow::Result<ManifestFile> {
+    use sha2::{Digest, Sha256};
+    let mut file = fs::File::open(path)
+        .with_context(|| format!("cannot open {} to hash it", path.display()))?;
+    let mut hasher = Sha256::new();
+    let bytes = std::io::copy(&mut file, &mut hasher)
+        .with_context(|| format!("cannot read {} to hash it", path.display()))?;
+    let digest = hasher.finalize();
+    Ok(ManifestFile {
+        path: path.strip_prefix(root).unwrap_or(path).to_path_buf(),
+        bytes,
+        sha256: digest.iter().map(|b| format!("{b:02x}")).collect(),
+    })
 }
