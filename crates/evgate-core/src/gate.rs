@@ -138,15 +138,14 @@ pub fn keep_bitmap(
     let lookup = MaskLookup::new(mask);
     let inversion = mode.inversion();
     let mut kept = 0;
-    for (chunk, word) in events.chunks(64).zip(keep.iter_mut()) {
-        let mut bits = 0u64;
-        for (position, event) in chunk.iter().enumerate() {
-            let (_, bit) = lookup.probe(event);
-            bits |= (bit ^ inversion) << position;
-        }
-        *word = bits;
-        kept += bits.count_ones() as usize;
-    }
+    let mut sinks = BitSinks::new([keep]);
+    sinks.extend(events, |event| {
+        let (_, bit) = lookup.probe(event);
+        let keep_bit = bit ^ inversion;
+        kept += keep_bit as usize;
+        [keep_bit]
+    });
+    sinks.finish();
     Ok(kept)
 }
 
@@ -205,35 +204,72 @@ impl<'a, const N: usize> Outputs<'a, N> {
     }
 }
 
-/// Packs bits into words, 64 at a time.
-struct BitSink<'a> {
-    words: &'a mut [u64],
+/// Packs `N` bits per event into `N` bitmaps (bit i of word i / 64 for event i), filling whole
+/// words 64 events at a time where a run of events allows.
+struct BitSinks<'a, const N: usize> {
+    bitmaps: [&'a mut [u64]; N],
     index: usize,
-    current: u64,
+    partial: [u64; N],
 }
 
-impl<'a> BitSink<'a> {
-    fn new(words: &'a mut [u64]) -> Self {
+impl<'a, const N: usize> BitSinks<'a, N> {
+    /// The bitmaps must hold a bit for every event that will be pushed (see `check_bitmap`).
+    fn new(bitmaps: [&'a mut [u64]; N]) -> Self {
         Self {
-            words,
+            bitmaps,
             index: 0,
-            current: 0,
+            partial: [0; N],
         }
     }
 
     #[inline(always)]
-    fn push(&mut self, bit: u64) {
-        self.current |= bit << (self.index % 64);
+    fn push(&mut self, bits: [u64; N]) {
+        for (partial, bit) in self.partial.iter_mut().zip(bits) {
+            *partial |= bit << (self.index % 64);
+        }
         self.index += 1;
         if self.index.is_multiple_of(64) {
-            self.words[self.index / 64 - 1] = self.current;
-            self.current = 0;
+            self.flush();
         }
     }
 
-    fn finish(self) {
+    fn flush(&mut self) {
+        let word = (self.index - 1) / 64;
+        for (bitmap, partial) in self.bitmaps.iter_mut().zip(&mut self.partial) {
+            bitmap[word] = std::mem::take(partial);
+        }
+    }
+
+    /// Pushes the bits of every event of `run`, in order.
+    #[inline(always)]
+    fn extend(&mut self, run: &[Event], mut bits_of: impl FnMut(&Event) -> [u64; N]) {
+        let head = ((64 - self.index % 64) % 64).min(run.len());
+        for event in &run[..head] {
+            self.push(bits_of(event));
+        }
+        let mut chunks = run[head..].chunks_exact(64);
+        for chunk in &mut chunks {
+            let mut words = [0u64; N];
+            for (position, event) in chunk.iter().enumerate() {
+                for (word, bit) in words.iter_mut().zip(bits_of(event)) {
+                    *word |= bit << position;
+                }
+            }
+            for (bitmap, word) in self.bitmaps.iter_mut().zip(words) {
+                bitmap[self.index / 64] = word;
+            }
+            self.index += 64;
+        }
+        for event in chunks.remainder() {
+            self.push(bits_of(event));
+        }
+    }
+
+    /// Writes the last, partly filled words (their unused bits clear).
+    fn finish(mut self) {
         if !self.index.is_multiple_of(64) {
-            self.words[self.index / 64] = self.current;
+            self.index += 64 - self.index % 64;
+            self.flush();
         }
     }
 }
@@ -422,32 +458,26 @@ impl<'a> ForecastView<'a> {
         check_bitmap(keep, events.len())?;
         check_bitmap(judged, events.len())?;
         let inversion = mode.inversion();
-        let mut keep_bits = BitSink::new(keep);
-        let mut judged_bits = BitSink::new(judged);
+        let mut sinks = BitSinks::new([keep, judged]);
         let mut counts = GateCounts::default();
         self.for_each_run(events, |run, mask_index| {
             let Some(index) = mask_index else {
-                for _ in run {
-                    keep_bits.push(0);
-                    judged_bits.push(0);
-                }
+                sinks.extend(run, |_| [0, 0]);
                 counts.unjudged += run.len();
                 return;
             };
             let lookup = MaskLookup::new(self.mask(index).expect("run index is a horizon"));
             let (first, last) = self.interval(index);
-            for event in run {
+            sinks.extend(run, |event| {
                 let (inside, bit) = lookup.probe(event);
                 let judged_bit = inside & u64::from((event.t >= first) & (event.t <= last));
                 let keep_bit = judged_bit & (bit ^ inversion);
-                keep_bits.push(keep_bit);
-                judged_bits.push(judged_bit);
                 counts.kept += keep_bit as usize;
                 counts.unjudged += (1 - judged_bit) as usize;
-            }
+                [keep_bit, judged_bit]
+            });
         });
-        keep_bits.finish();
-        judged_bits.finish();
+        sinks.finish();
         counts.suppressed = events.len() - counts.kept - counts.unjudged;
         Ok(counts)
     }
