@@ -119,7 +119,7 @@ pub fn partition(
         let (_, bit) = lookup.probe(event);
         let keep = bit ^ inversion;
         // Branch-free routing: write to both and advance only the chosen cursor.
-        outputs.push(event, [keep as usize, (1 - keep) as usize]);
+        outputs.push_among(event, [keep as usize, (1 - keep) as usize]);
     }
     let [kept_count, _] = outputs.finish();
     kept_count
@@ -161,6 +161,9 @@ fn check_bitmap(words: &[u64], events: usize) -> Result<(), GateError> {
     Ok(())
 }
 
+/// Position of the unjudged vector among a forecast partition's outputs.
+const UNJUDGED: usize = 2;
+
 /// `N` output vectors filled without branches: every event is written at every cursor and only
 /// the chosen cursors advance.
 struct Outputs<'a, const N: usize> {
@@ -177,18 +180,36 @@ impl<'a, const N: usize> Outputs<'a, N> {
         Self { vectors, written }
     }
 
-    /// Appends `event` to each vector whose `advance` is 1; `advance` must be 0 or 1 and at most
-    /// as many pushes as the `events` given to `new` may be made.
+    /// Writes `event` at the cursors of the first `M` vectors and advances those whose `advance`
+    /// is 1; at most one may be 1, and at most as many events as were announced to `new` may be
+    /// pushed in all.
     #[inline(always)]
-    fn push(&mut self, event: &Event, advance: [usize; N]) {
+    fn push_among<const M: usize>(&mut self, event: &Event, advance: [usize; M]) {
+        debug_assert!(M <= N && advance.iter().sum::<usize>() <= 1);
         for ((vector, written), step) in self.vectors.iter_mut().zip(&mut self.written).zip(advance)
         {
             debug_assert!(*written < vector.capacity());
-            // SAFETY: `new` reserved one slot per event beyond the initial length and each event
-            // advances at most one cursor per push, so `written` < capacity.
+            // SAFETY: `new` reserved one slot per announced event beyond the initial length and
+            // each push advances at most one cursor, so `written` < capacity.
             unsafe { vector.as_mut_ptr().add(*written).write(*event) };
             *written += step;
         }
+    }
+
+    /// Appends `events` to vector `index`.
+    fn push_all_into(&mut self, index: usize, events: &[Event]) {
+        let (vector, written) = (&mut self.vectors[index], &mut self.written[index]);
+        debug_assert!(*written + events.len() <= vector.capacity());
+        // SAFETY: as in `push_among`: the slots were reserved by `new`, and the source is a
+        // caller's slice, which cannot overlap the vector's spare capacity.
+        unsafe {
+            std::ptr::copy_nonoverlapping(
+                events.as_ptr(),
+                vector.as_mut_ptr().add(*written),
+                events.len(),
+            )
+        };
+        *written += events.len();
     }
 
     /// Commits the written events; returns how many each vector gained.
@@ -417,9 +438,7 @@ impl<'a> ForecastView<'a> {
         let mut outputs = Outputs::new([kept, suppressed, unjudged], events.len());
         self.for_each_run(events, |run, mask_index| {
             let Some(index) = mask_index else {
-                for event in run {
-                    outputs.push(event, [0, 0, 1]);
-                }
+                outputs.push_all_into(UNJUDGED, run);
                 return;
             };
             let lookup = MaskLookup::new(self.mask(index).expect("run index is a horizon"));
@@ -427,15 +446,14 @@ impl<'a> ForecastView<'a> {
             for event in run {
                 let (inside, bit) = lookup.probe(event);
                 let judged = inside & u64::from((event.t >= first) & (event.t <= last));
-                let keep = judged & (bit ^ inversion);
-                outputs.push(
-                    event,
-                    [
-                        keep as usize,
-                        (judged - keep) as usize,
-                        (1 - judged) as usize,
-                    ],
-                );
+                // Off-sensor and out-of-order events are rare, so this branch is predicted and
+                // the common path writes two cursors instead of three.
+                if judged == 0 {
+                    outputs.push_all_into(UNJUDGED, std::slice::from_ref(event));
+                    continue;
+                }
+                let keep = bit ^ inversion;
+                outputs.push_among(event, [keep as usize, (1 - keep) as usize]);
             }
         });
         let [kept, suppressed, unjudged] = outputs.finish();
