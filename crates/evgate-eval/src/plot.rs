@@ -184,6 +184,8 @@ impl LinePlot {
         let mut encoder = png::Encoder::new(BufWriter::new(file), WIDTH as u32, HEIGHT as u32);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
+        // Flat-coloured plots compress well; the reports are committed, so keep them small.
+        encoder.set_compression(png::Compression::Best);
         let encode_error = |source| PlotError::Encode {
             path: path.to_path_buf(),
             source,
