@@ -60,9 +60,9 @@ pub struct SequenceArgs {
     /// Simulated duration in seconds (at least 0.15).
     #[arg(long, default_value_t = 2.0)]
     pub duration_s: f64,
-    /// Forecast horizons sampled per 50 ms reference time.
-    #[arg(long, default_value_t = 2)]
-    pub horizons: usize,
+    /// Forecast horizons sampled per 50 ms reference time (1–16).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..=16))]
+    pub horizons: u64,
     /// Output directory (created if missing).
     #[arg(long, required = true)]
     pub out: Option<PathBuf>,
@@ -104,7 +104,7 @@ fn run_sequence(args: SequenceArgs) -> anyhow::Result<()> {
     };
     let options = SequenceOptions {
         duration_us: (args.duration_s * 1e6).round() as i64,
-        horizons_per_reference: args.horizons,
+        horizons_per_reference: args.horizons as usize,
     };
     fs::create_dir_all(&out)
         .with_context(|| format!("cannot create output directory {}", out.display()))?;
@@ -171,7 +171,23 @@ pub fn write_sequence(
     sequence
         .write(&npz)
         .with_context(|| format!("cannot write {}", npz.display()))?;
-    Ok(summarise(config, seed, options, &report, wall_s, vec![npz]))
+    let evg = dir.join("events.evg");
+    let mut writer = evgate_io::create(&evg, config.sensor)
+        .with_context(|| format!("cannot create {}", evg.display()))?;
+    writer
+        .write(&sequence.events)
+        .with_context(|| format!("cannot write {}", evg.display()))?;
+    writer
+        .finish()
+        .with_context(|| format!("cannot finish {}", evg.display()))?;
+    Ok(summarise(
+        config,
+        seed,
+        options,
+        &report,
+        wall_s,
+        vec![evg, npz],
+    ))
 }
 
 fn summarise(
