@@ -47,7 +47,11 @@ def parse_model(spec: str) -> tuple[str, Path]:
 
 @torch.no_grad()
 def evaluate_sequence(
-    network: SuppressionNetwork, sequence: Sequence, horizons_ms: list[float], with_baselines: bool
+    network: SuppressionNetwork,
+    sequence: Sequence,
+    horizons_ms: list[float],
+    with_baselines: bool,
+    max_seconds: float = 0.0,
 ) -> dict[str, SequenceScores]:
     """Scores keyed "current", "future-<h>ms" (and "no-forecast-<h>ms", "linear-<h>ms")."""
     network.eval()
@@ -58,6 +62,8 @@ def evaluate_sequence(
     previous = None
     for reference in sequence.ref_ts:
         t_end = int(reference)
+        if max_seconds > 0 and t_end - int(sequence.ref_ts[0]) >= max_seconds * 1e6:
+            break
         window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
         ts, xs, ys, on = (a[window] for a in (sequence.events_t, sequence.events_x, sequence.events_y, sequence.events_on))
         voxel = voxel_grid(ts, xs, ys, on, t_end, sequence.width, sequence.height)
@@ -122,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--horizons-ms", default="100", help="comma-separated forecast horizons to score (ms)")
     parser.add_argument("--presets", default="", help="comma-separated presets to keep (default: all)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    parser.add_argument("--max-seconds", type=float, default=0.0, help="score only the leading seconds (0 = all)")
     parser.add_argument("--output", type=Path, required=True, help="JSON report path")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
@@ -140,7 +147,9 @@ def main(argv: list[str] | None = None) -> int:
         if keep and sequence.preset not in keep:
             continue
         for index, (name, checkpoint) in enumerate(networks):
-            scores = evaluate_sequence(checkpoint.network, sequence, horizons, with_baselines=index == 0)
+            scores = evaluate_sequence(
+                checkpoint.network, sequence, horizons, with_baselines=index == 0, max_seconds=args.max_seconds
+            )
             results[name].append((sequence.preset, {key: s.summary() for key, s in scores.items()}))
     for name, checkpoint in networks:
         report["models"][name] = {

@@ -6,10 +6,15 @@ import torch.nn.functional as F
 CHARBONNIER_EPSILON = 1e-3
 
 
-def bce_dice(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, dice_weight: float) -> torch.Tensor:
-    """BCE over valid pixels plus `dice_weight` x soft Dice loss; tensors share one shape."""
+def bce_dice(
+    logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, dice_weight: float, positive_weight: float = 1.0
+) -> torch.Tensor:
+    """BCE over valid pixels (IMO pixels weighted by `positive_weight`) plus `dice_weight` x
+    soft Dice loss; tensors share one shape."""
     valid = valid.to(logits.dtype)
-    bce = F.binary_cross_entropy_with_logits(logits, target, reduction="none")
+    bce = F.binary_cross_entropy_with_logits(
+        logits, target, reduction="none", pos_weight=torch.tensor(positive_weight, dtype=logits.dtype)
+    )
     loss = (bce * valid).sum() / valid.sum().clamp_min(1.0)
     if dice_weight > 0:
         probability = torch.sigmoid(logits) * valid

@@ -75,6 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warmup", type=int, default=50, help="warm-up steps")
     parser.add_argument("--weight-decay", type=float, default=1e-4, help="AdamW weight decay")
     parser.add_argument("--dice-weight", type=float, default=0.5, help="Dice term weight (0 disables Dice)")
+    parser.add_argument("--positive-weight", type=float, default=1.0, help="BCE weight of IMO pixels")
     parser.add_argument("--flow-weight", type=float, default=0.1, help="flow L1 weight")
     parser.add_argument("--smoothness-weight", type=float, default=0.05, help="Charbonnier smoothness weight")
     parser.add_argument("--contrast-weight", type=float, default=1.0, help="contrast-maximisation weight")
@@ -94,6 +95,13 @@ def build_parser() -> argparse.ArgumentParser:
         default="",
         help="comma-separated steps whose checkpoints are also kept as checkpoint-step<N>.pt "
         "(equal-step ablations against a longer run with the same schedule)",
+    )
+    parser.add_argument(
+        "--stop-at-step",
+        type=int,
+        default=0,
+        help="end the run at this step while keeping the learning-rate schedule of --steps "
+        "(short ablations that match a longer run step for step); 0 = run all --steps",
     )
     parser.add_argument("--resume", action="store_true", help="continue from run-dir/checkpoint.pt")
     return parser
@@ -135,6 +143,7 @@ def train(args: argparse.Namespace) -> Path:
     )
     weights = LossWeights(
         dice=args.dice_weight,
+        positive=args.positive_weight,
         flow=args.flow_weight,
         smoothness=args.smoothness_weight,
         contrast=args.contrast_weight,
@@ -156,7 +165,8 @@ def train(args: argparse.Namespace) -> Path:
     with open(args.run_dir / "log.jsonl", "a") as log_file, tqdm(
         total=args.steps, initial=start_step, desc=f"train {network.config.size}", unit="step"
     ) as progress:
-        for step in range(start_step, args.steps):
+        last_step = min(args.steps, args.stop_at_step) if args.stop_at_step > 0 else args.steps
+        for step in range(start_step, last_step):
             rate = learning_rate(step, args.steps, args.lr, args.warmup)
             for group in optimiser.param_groups:
                 group["lr"] = rate
@@ -182,13 +192,13 @@ def train(args: argparse.Namespace) -> Path:
             log_file.flush()
             progress.update(1)
             progress.set_postfix(loss=record["total"], mask=record["mask"], future=record["future_mask"])
-            if (step + 1) % args.checkpoint_every == 0 or step + 1 == args.steps or step + 1 in keep_steps:
+            if (step + 1) % args.checkpoint_every == 0 or step + 1 in (last_step, *keep_steps):
                 save_checkpoint(checkpoint_path, network, optimiser, step + 1, digest, train_config)
             if step + 1 in keep_steps:
                 save_checkpoint(
                     args.run_dir / f"checkpoint-step{step + 1}.pt", network, optimiser, step + 1, digest, train_config
                 )
-    log.info("finished %d steps in %.0f s; checkpoint %s", args.steps, time.monotonic() - started, checkpoint_path)
+    log.info("finished at step %d in %.0f s; checkpoint %s", last_step, time.monotonic() - started, checkpoint_path)
     return checkpoint_path
 
 

@@ -77,3 +77,14 @@ def test_object_crops_contain_an_object(synthetic_dir):
         frame = sequence.masks[sequence.grid_index(int(sequence.ref_ts[start]))]
         assert 0 <= crop.left <= sequence.width - 32 and 0 <= crop.top <= sequence.height - 32
         assert frame[crop.top : crop.top + 32, crop.left : crop.left + 32].any()
+
+
+def test_stop_at_step_keeps_the_longer_schedule(synthetic_dir, tmp_path):
+    from evgate_train.train import learning_rate
+
+    run = tmp_path / "run"
+    train(_args(synthetic_dir, run, 4, "--stop-at-step", "2"))
+    records = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in records] == [1, 2]
+    assert records[1]["lr"] == pytest.approx(learning_rate(1, 4, 2e-3, 1))
+    assert load_checkpoint(run / "checkpoint.pt").step == 2
