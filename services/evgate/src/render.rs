@@ -88,7 +88,7 @@ struct Stream {
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    if !(args.window_ms > 0.0) {
+    if args.window_ms.is_nan() || args.window_ms <= 0.0 {
         bail!("--window-ms {} must be positive", args.window_ms);
     }
     let stream = load(&args.input)?;
