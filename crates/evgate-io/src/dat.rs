@@ -70,12 +70,12 @@ impl DatDecoder {
                 let data = u32::from_le_bytes([record[4], record[5], record[6], record[7]]);
                 if let Some(last) = self.last_raw_t {
                     if raw_t < last && last - raw_t > 1 << 31 {
-                        self.wraps += TIME_WRAP;
+                        self.wraps = self.wraps.saturating_add(TIME_WRAP);
                     }
                 }
                 self.last_raw_t = Some(raw_t);
                 let event = Event::new(
-                    self.wraps + raw_t as i64,
+                    self.wraps.saturating_add(raw_t as i64),
                     (data & 0x3fff) as u16,
                     ((data >> 14) & 0x3fff) as u16,
                     (data >> 28) != 0,

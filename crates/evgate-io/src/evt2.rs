@@ -56,7 +56,10 @@ impl Evt2Decoder {
                 let offset = start + 4 * i as u64;
                 match word >> 28 {
                     kind @ (0x0 | 0x1) => {
-                        let t = self.wraps + self.time_high + ((word >> 22) & 0x3f) as i64;
+                        // Saturating: adversarial input can repeat wraps past the i64 range.
+                        let t = self
+                            .wraps
+                            .saturating_add(self.time_high + ((word >> 22) & 0x3f) as i64);
                         let x = ((word >> 11) & 0x7ff) as u16;
                         let y = (word & 0x7ff) as u16;
                         self.admission
@@ -65,7 +68,7 @@ impl Evt2Decoder {
                     0x8 => {
                         let time_high = ((word & 0x0fff_ffff) as i64) << 6;
                         if time_high < self.time_high {
-                            self.wraps += TIME_HIGH_WRAP;
+                            self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
                         }
                         self.time_high = time_high;
                     }

@@ -69,7 +69,10 @@ impl Evt3Decoder {
             for (i, word) in bytes.chunks_exact(2).enumerate() {
                 let word = u16::from_le_bytes([word[0], word[1]]);
                 let offset = start + 2 * i as u64;
-                let t = self.wraps + (self.time_high << 12) + self.time_low;
+                // Saturating: adversarial input can repeat wraps past the i64 range.
+                let t = self
+                    .wraps
+                    .saturating_add((self.time_high << 12) + self.time_low);
                 match word >> 12 {
                     0x0 => self.y = word & 0x7ff,
                     0x2 => {
@@ -106,7 +109,7 @@ impl Evt3Decoder {
                     0x8 => {
                         let time_high = (word & 0xfff) as i64;
                         if time_high < self.time_high {
-                            self.wraps += TIME_HIGH_WRAP;
+                            self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
                         }
                         self.time_high = time_high;
                     }

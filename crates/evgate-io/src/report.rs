@@ -72,8 +72,10 @@ impl Admission {
                 self.report
                     .first_time_regression_index
                     .get_or_insert(self.report.events);
-                self.report.largest_time_regression_us =
-                    self.report.largest_time_regression_us.max(last_t - event.t);
+                self.report.largest_time_regression_us = self
+                    .report
+                    .largest_time_regression_us
+                    .max(last_t.saturating_sub(event.t));
             }
         }
         self.last_t = Some(event.t);
@@ -103,5 +105,16 @@ mod tests {
         assert_eq!(report.first_time_regression_index, Some(1));
         assert_eq!(report.largest_time_regression_us, 7);
         assert!(!report.is_clean());
+    }
+
+    #[test]
+    fn a_regression_across_the_whole_i64_range_saturates() {
+        // Found by the `native` and `aedat4` fuzz targets: the step back overflowed.
+        let mut admission = Admission::new(SensorSize::new(4, 4));
+        let mut out = Vec::new();
+        admission.admit(&mut out, Event::new(i64::MAX, 0, 0, true), 0);
+        admission.admit(&mut out, Event::new(i64::MIN, 0, 0, true), 16);
+        assert_eq!(admission.report.largest_time_regression_us, i64::MAX);
+        assert_eq!(admission.report.time_regressions, 1);
     }
 }
