@@ -103,7 +103,8 @@ pub fn inspect(file: &Path, sensor: Option<SensorSize>) -> anyhow::Result<FileIn
     }
     progress.finish_and_clear();
     let duration_s = match (min_t, max_t) {
-        (Some(a), Some(b)) => (b - a) as f64 * 1e-6,
+        // In f64: the difference of extreme i64 times overflows i64.
+        (Some(a), Some(b)) => (b as f64 - a as f64) * 1e-6,
         _ => 0.0,
     };
     let sensor_size = Some(reader.sensor_size()).filter(|&s| s != UNBOUNDED_SENSOR);
