@@ -66,6 +66,13 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         headline,
         report.elapsed_s
     );
+    if report.models().next().is_none() {
+        let _ = writeln!(
+            out,
+            "No model was evaluated: no-forecast and linear start from the ground-truth mask at t, \
+             so they measure forecasting alone.\n"
+        );
+    }
     let _ = writeln!(out, "Methods:\n");
     for method in &report.methods {
         let _ = writeln!(out, "- `{}`: {}", method.name, method.description);
