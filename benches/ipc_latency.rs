@@ -13,7 +13,7 @@
 use std::time::{Duration, Instant};
 
 use evgate_core::{words_for, BitMask, Event, ForecastView, GateMode, SensorSize};
-use evgate_e2e::{binary, unique_names, wait_until, Process};
+use evgate_e2e::{binary, unique_names, wait_until, workspace_root, Process};
 use evgate_ipc::{
     clock, create_node, BatchHeader, ForecastHeader, PipelineNames, Qos, SlicePublisher,
     SliceSubscriber, Stream,
@@ -39,7 +39,9 @@ fn main() -> BenchResult<()> {
     if let Some(domain) = value_of("--echo") {
         return echo(&PipelineNames::new(&domain, "cam")?);
     }
-    let out = value_of("--out").unwrap_or_else(|| "target/bench/ipc_latency.json".to_owned());
+    // cargo runs benches in the package directory; relative paths mean the workspace root.
+    let out = workspace_root()
+        .join(value_of("--out").unwrap_or_else(|| "target/bench/ipc_latency.json".to_owned()));
     let mut results = Vec::new();
     for (size, iterations) in [(1_000, 3_000), (10_000, 2_000), (100_000, 500)] {
         let events = batch(size);
@@ -65,12 +67,12 @@ fn main() -> BenchResult<()> {
         "machine": machine(),
         "results": results,
     });
-    if let Some(parent) = std::path::Path::new(&out).parent() {
+    if let Some(parent) = out.parent() {
         std::fs::create_dir_all(parent)?;
     }
     std::fs::write(&out, serde_json::to_string_pretty(&report)?)?;
     println!("{}", serde_json::to_string_pretty(&report)?);
-    eprintln!("written to {out}");
+    eprintln!("written to {}", out.display());
     Ok(())
 }
 

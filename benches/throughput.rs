@@ -38,7 +38,9 @@ fn main() -> BenchResult<()> {
             .and_then(|i| args.get(i + 1))
             .cloned()
     };
-    let out = value_of("--out").unwrap_or_else(|| "target/bench/throughput.json".to_owned());
+    // cargo runs benches in the package directory; relative paths mean the workspace root.
+    let out = workspace_root()
+        .join(value_of("--out").unwrap_or_else(|| "target/bench/throughput.json".to_owned()));
     let total_events: u64 = value_of("--events").map_or(Ok(200_000_000), |v| v.parse())?;
     let batch_events: usize = value_of("--batch-events").map_or(Ok(100_000), |v| v.parse())?;
 
@@ -51,12 +53,12 @@ fn main() -> BenchResult<()> {
         "throughput": throughput,
         "resident-memory": memory,
     });
-    if let Some(parent) = std::path::Path::new(&out).parent() {
+    if let Some(parent) = out.parent() {
         std::fs::create_dir_all(parent)?;
     }
     std::fs::write(&out, serde_json::to_string_pretty(&report)?)?;
     println!("{}", serde_json::to_string_pretty(&report)?);
-    eprintln!("written to {out}");
+    eprintln!("written to {}", out.display());
     Ok(())
 }
 
