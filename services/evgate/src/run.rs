@@ -125,6 +125,14 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             bail!("--duration = {duration} must be a positive number of seconds");
         }
     }
+    const POLICIES: [&str; 3] = ["pass", "drop", "last-mask"];
+    if !POLICIES.contains(&args.no_forecast.as_str()) {
+        bail!(
+            "--no-forecast = {:?} is not a policy; accepted: {}",
+            args.no_forecast,
+            POLICIES.join(", ")
+        );
+    }
     if !args.no_infer && !args.model.is_file() {
         bail!(
             "model {} not found: export one (models/training) or pass --model, or run with --no-infer",
