@@ -60,3 +60,69 @@ fn a_real_evt3_recording_reaches_the_gate_event_for_event_at_its_own_pace() {
         "published {span_s:.3} s of events in {wall_s:.3} s"
     );
 }
+
+#[test]
+fn a_looping_replay_runs_until_sigint_and_then_ends_the_stream_cleanly() {
+    let recording = workspace_root().join("../shared/data/real/evt3_sample.raw");
+    let mut reader = evgate_io::open(&recording).expect("the shared EVT 3.0 sample decodes");
+    let per_pass = evgate_io::read_all(reader.as_mut()).expect("decodes").len() as u64;
+
+    let names = unique_names("loop");
+    let node = evgate_ipc::create_node("loop-test").unwrap();
+    let stats = evgate_ipc::LatestSubscriber::<evgate_ipc::PipelineStats>::open(
+        &node,
+        &names,
+        evgate_ipc::Stream::Stats,
+    )
+    .unwrap();
+    let mut gate = Process::start(
+        &binary("evgate-gate", "evgate-gate").unwrap(),
+        &[
+            "--domain",
+            &names.domain,
+            "--camera",
+            &names.camera,
+            "--json",
+            "--exit-at-end-of-stream",
+            "--stats-interval-ms",
+            "10",
+        ],
+    )
+    .unwrap();
+    let mut ingest = Process::start(
+        &binary("evgate-ingest", "evgate-ingest").unwrap(),
+        &[
+            "--domain",
+            &names.domain,
+            "--camera",
+            &names.camera,
+            "--json",
+            "--fast",
+            "--loop",
+            "--input",
+            recording.to_str().unwrap(),
+            "--wait-for-subscribers",
+            "1",
+        ],
+    )
+    .unwrap();
+    evgate_e2e::wait_until("three passes through the gate", TIMEOUT, || {
+        stats
+            .latest()
+            .unwrap()
+            .is_some_and(|s| s.input_events > 3 * per_pass)
+    })
+    .unwrap();
+    ingest.signal(libc::SIGINT);
+    let ingest_summary = ingest.summary(TIMEOUT).unwrap();
+    let gate_summary = gate.summary(TIMEOUT).unwrap();
+    assert_eq!(ingest_summary["ended-by"], "signal");
+    assert!(u64_at(&ingest_summary, "/passes") >= 3);
+    // The stream ended with an end-of-stream batch: the gate saw it and exited by itself.
+    assert_eq!(gate_summary["ended-by"], "end-of-stream");
+    assert_eq!(
+        u64_at(&gate_summary, "/stats/input-events"),
+        u64_at(&ingest_summary, "/events-published")
+    );
+    assert_eq!(gate_summary["balanced"], true);
+}
