@@ -5,6 +5,7 @@ mod convert;
 mod eval;
 mod info;
 mod render;
+mod run;
 mod sim;
 
 use clap::{Parser, Subcommand};
@@ -28,6 +29,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Convert an event file; the output format follows the extension (.csv, .raw EVT 3.0, .evg).
     Convert(convert::ConvertArgs),
+    /// Run the pipeline (ingest → infer → gate) with a live status line and a final summary.
+    Run(run::RunArgs),
     /// Score the model and the baselines on labelled sequences; write JSON, Markdown and plots.
     Eval(eval::EvalArgs),
 }
@@ -44,5 +47,6 @@ fn main() -> anyhow::Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Sim(args) => sim::run(args),
         Command::Render(args) => render::run(args),
+        Command::Run(args) => run::run(args),
     }
 }
