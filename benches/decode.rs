@@ -15,7 +15,11 @@ use evgate_io::reader::from_bytes;
 use evgate_io::{read_all, EventWriter, Format};
 
 fn real(name: &str) -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/real/")).join(name)
+    PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/data/real/"
+    ))
+    .join(name)
 }
 
 fn decode_count(bytes: &[u8], format: Format, sensor: Option<SensorSize>) -> usize {
@@ -61,12 +65,42 @@ fn inputs() -> Vec<Input> {
     }
 
     vec![
-        Input { name: "evt2 (evt2_sample.raw)", format: Format::Evt2, sensor: None, bytes: evt2 },
-        Input { name: "evt3 (evt3_sample.raw)", format: Format::Evt3, sensor: None, bytes: read("evt3_sample.raw") },
-        Input { name: "aedat4 (sample.aedat4)", format: Format::Aedat4, sensor: None, bytes: read("sample.aedat4") },
-        Input { name: "csv (generated)", format: Format::Csv, sensor: Some(sensor), bytes: csv },
-        Input { name: "evg (generated)", format: Format::Native, sensor: None, bytes: native.into_inner() },
-        Input { name: "dat (generated)", format: Format::Dat, sensor: None, bytes: dat },
+        Input {
+            name: "evt2 (evt2_sample.raw)",
+            format: Format::Evt2,
+            sensor: None,
+            bytes: evt2,
+        },
+        Input {
+            name: "evt3 (evt3_sample.raw)",
+            format: Format::Evt3,
+            sensor: None,
+            bytes: read("evt3_sample.raw"),
+        },
+        Input {
+            name: "aedat4 (sample.aedat4)",
+            format: Format::Aedat4,
+            sensor: None,
+            bytes: read("sample.aedat4"),
+        },
+        Input {
+            name: "csv (generated)",
+            format: Format::Csv,
+            sensor: Some(sensor),
+            bytes: csv,
+        },
+        Input {
+            name: "evg (generated)",
+            format: Format::Native,
+            sensor: None,
+            bytes: native.into_inner(),
+        },
+        Input {
+            name: "dat (generated)",
+            format: Format::Dat,
+            sensor: None,
+            bytes: dat,
+        },
     ]
 }
 
