@@ -29,16 +29,6 @@ pub enum Format {
 }
 
 impl Format {
-    pub const ALL: [Format; 7] = [
-        Format::Evt2,
-        Format::Evt3,
-        Format::Dat,
-        Format::Aedat4,
-        Format::Csv,
-        Format::Native,
-        Format::EvimoNpz,
-    ];
-
     pub fn name(self) -> &'static str {
         match self {
             Format::Evt2 => "evt2",
