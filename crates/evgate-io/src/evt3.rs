@@ -8,6 +8,8 @@
 //! (0xA), `OTHERS` (0xE) and `CONTINUED_12` (0xF) carry no CD events and are passed over; any
 //! other type is skipped and counted.
 //!
+//! `% evgate_time_offset_us N` in the header (written by our encoder) is added to every time.
+//!
 //! A `TIME_LOW` smaller than the previous one under the same `TIME_HIGH` is taken at face value
 //! (the event time steps back and the regression is counted): it is not a wrap, since the
 //! sensor sends a new `TIME_HIGH` whenever bit 12 changes.
@@ -32,14 +34,14 @@ pub struct Evt3Decoder {
 }
 
 impl Evt3Decoder {
-    /// `source` must be positioned after the `%` header.
-    pub fn new(source: ByteSource, sensor_size: SensorSize) -> Self {
+    /// `source` must be positioned after the `%` header; `time_offset` is added to every time.
+    pub fn new(source: ByteSource, sensor_size: SensorSize, time_offset: i64) -> Self {
         Self {
             source,
             admission: Admission::new(sensor_size),
             time_low: 0,
             time_high: 0,
-            wraps: 0,
+            wraps: time_offset,
             y: 0,
             base_x: 0,
             vector_on: false,
@@ -131,7 +133,7 @@ mod tests {
     fn decode(words: &[u16], sensor_size: SensorSize) -> (Vec<Event>, DecodeReport) {
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         let source = ByteSource::new("mem.raw".into(), Box::new(Cursor::new(bytes)));
-        let mut decoder = Evt3Decoder::new(source, sensor_size);
+        let mut decoder = Evt3Decoder::new(source, sensor_size, 0);
         let (mut all, mut chunk) = (Vec::new(), Vec::new());
         while decoder.read_chunk(&mut chunk).unwrap() > 0 {
             all.extend_from_slice(&chunk);

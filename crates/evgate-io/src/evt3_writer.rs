@@ -3,8 +3,12 @@
 //! one `ADDR_X` word.
 //!
 //! The format's time base is 24 bits with wraps detected on `TIME_HIGH`, so events must be in
-//! non-decreasing time and non-negative; a gap of more than 4095 `TIME_HIGH` units is bridged
-//! with intermediate `TIME_HIGH` words so a decoder counts every wrap.
+//! non-decreasing time; a gap of more than 4095 `TIME_HIGH` units is bridged with intermediate
+//! `TIME_HIGH` words so a decoder counts every wrap. Times are written relative to the first
+//! event's time rounded down to a multiple of 2^24 µs, declared in the header as
+//! `% evgate_time_offset_us N` (our decoder adds it back; other readers see the times modulo
+//! it): absolute times (AEDAT 4 records Unix time) would otherwise need millions of bridging
+//! words. The header is therefore written with the first event (or by `finish`).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -16,22 +20,27 @@ use crate::writer::{io_error, EncodeError, EventWriter};
 
 /// Coordinates are 11-bit fields.
 const MAX_SIDE: u16 = 2048;
+/// The time offset is a whole number of 24-bit wraps, so the low bits are written unchanged.
+const TIME_BASE_WRAP: i64 = 1 << 24;
 /// The largest `TIME_HIGH` step a decoder reads unambiguously (a smaller 12-bit value = a wrap).
 const MAX_TIME_HIGH_STEP: u64 = 4095;
 
 pub struct Evt3Writer<W: Write> {
     path: PathBuf,
     out: W,
+    sensor_size: SensorSize,
+    /// Set with the first event, when the header is written.
+    time_offset: Option<i64>,
     words: Vec<u8>,
     time_high: Option<u64>,
     time_low: Option<u16>,
     y: Option<u16>,
-    last_t: i64,
+    last_t: Option<i64>,
     index: u64,
 }
 
 impl<W: Write> Evt3Writer<W> {
-    pub fn new(path: PathBuf, mut out: W, sensor_size: SensorSize) -> Result<Self, EncodeError> {
+    pub fn new(path: PathBuf, out: W, sensor_size: SensorSize) -> Result<Self, EncodeError> {
         let SensorSize { width, height } = sensor_size;
         if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
             return Err(EncodeError::UnsupportedSensor {
@@ -40,21 +49,25 @@ impl<W: Write> Evt3Writer<W> {
                 problem: format!("EVT 3.0 needs sides in 1..={MAX_SIDE}"),
             });
         }
-        let header = format!(
-            "% evt 3.0\n% format EVT3;height={height};width={width}\n% geometry {width}x{height}\n% end\n"
-        );
-        out.write_all(header.as_bytes())
-            .map_err(io_error(&path, "write"))?;
         Ok(Self {
             path,
             out,
+            sensor_size,
+            time_offset: None,
             words: Vec::new(),
             time_high: None,
             time_low: None,
             y: None,
-            last_t: 0,
+            last_t: None,
             index: 0,
         })
+    }
+
+    fn header(&self, time_offset: i64) -> String {
+        let SensorSize { width, height } = self.sensor_size;
+        format!(
+            "% evt 3.0\n% format EVT3;height={height};width={width}\n% geometry {width}x{height}\n% evgate_time_offset_us {time_offset}\n% end\n"
+        )
     }
 
     fn push(&mut self, kind: u16, payload: u16) {
@@ -63,10 +76,10 @@ impl<W: Write> Evt3Writer<W> {
     }
 
     fn encode(&mut self, event: &Event) -> Result<(), EncodeError> {
-        let problem = if event.t < self.last_t {
+        let problem = if self.last_t.is_some_and(|last| event.t < last) {
             Some(format!(
-                "time goes back from {} µs (EVT 3.0 needs non-decreasing, non-negative times)",
-                self.last_t
+                "time goes back from {} µs (EVT 3.0 needs non-decreasing times)",
+                self.last_t.unwrap_or_default()
             ))
         } else if event.x >= MAX_SIDE || event.y >= MAX_SIDE {
             Some(format!("coordinates must be below {MAX_SIDE}"))
@@ -81,9 +94,31 @@ impl<W: Write> Evt3Writer<W> {
                 problem,
             });
         }
-        self.last_t = event.t;
-        let time_high = event.t as u64 >> 12;
-        let time_low = (event.t & 0xfff) as u16;
+        self.last_t = Some(event.t);
+        let time_offset = match self.time_offset {
+            Some(offset) => offset,
+            None => {
+                let offset = event.t.div_euclid(TIME_BASE_WRAP) * TIME_BASE_WRAP;
+                let header = self.header(offset);
+                self.words.extend_from_slice(header.as_bytes());
+                self.time_offset = Some(offset);
+                offset
+            }
+        };
+        // Non-negative: times never go below the first one, which is at or above the offset.
+        let relative = event
+            .t
+            .checked_sub(time_offset)
+            .ok_or_else(|| EncodeError::Unencodable {
+                path: self.path.clone(),
+                index: self.index,
+                event: *event,
+                problem: format!(
+                    "more than 2^63 µs after the first event (offset {time_offset} µs)"
+                ),
+            })? as u64;
+        let time_high = relative >> 12;
+        let time_low = (relative & 0xfff) as u16;
         if self.time_high != Some(time_high) {
             let mut current = self.time_high.unwrap_or(0);
             while time_high - current > MAX_TIME_HIGH_STEP {
@@ -124,6 +159,12 @@ impl<W: Write> EventWriter for Evt3Writer<W> {
     }
 
     fn finish(mut self: Box<Self>) -> Result<(), EncodeError> {
+        if self.time_offset.is_none() {
+            let header = self.header(0);
+            self.out
+                .write_all(header.as_bytes())
+                .map_err(io_error(&self.path, "write"))?;
+        }
         self.out.flush().map_err(io_error(&self.path, "flush"))
     }
 }

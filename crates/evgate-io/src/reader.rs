@@ -60,6 +60,9 @@ event_reader!(CsvDecoder, Format::Csv);
 event_reader!(NativeDecoder, Format::Native);
 event_reader!(EvimoDecoder, Format::EvimoNpz);
 
+/// Header key of the time offset our EVT 3.0 encoder declares (see `evt3_writer`).
+const EVT3_TIME_OFFSET_KEY: &str = "evgate_time_offset_us";
+
 /// The size text inputs get when none is given: every coordinate fits, nothing is dropped.
 pub const UNBOUNDED_SENSOR: SensorSize = SensorSize::new(u16::MAX, u16::MAX);
 
@@ -131,7 +134,19 @@ fn from_source(
                 })?;
             match format {
                 Format::Evt2 => Box::new(Evt2Decoder::new(source, sensor_size)),
-                Format::Evt3 => Box::new(Evt3Decoder::new(source, sensor_size)),
+                Format::Evt3 => {
+                    let time_offset = match header.get(EVT3_TIME_OFFSET_KEY) {
+                        Some(text) => text.parse().map_err(|_| DecodeError::BadHeader {
+                            path: source.path().to_path_buf(),
+                            offset: 0,
+                            problem: format!(
+                                "`% {EVT3_TIME_OFFSET_KEY} {text}` is not an integer number of µs"
+                            ),
+                        })?,
+                        None => 0,
+                    };
+                    Box::new(Evt3Decoder::new(source, sensor_size, time_offset))
+                }
                 _ => Box::new(DatDecoder::new(source, sensor_size)?),
             }
         }
