@@ -9,6 +9,7 @@
 //! |---|---|
 //! | `EVGATE_BENCH_MODEL` | `models/evgate-S.onnx` |
 //! | `EVGATE_BENCH_THREADS` | 2 (intra-op threads) |
+//! | `EVGATE_BENCH_SPIN` | false (idle ONNX Runtime threads spin when true) |
 //! | `EVGATE_BENCH_PROVIDER` | cpu (cpu, cuda, auto) |
 //! | `EVGATE_BENCH_WINDOWS` | 200 measured windows (after 20 warm-up windows) |
 //! | `EVGATE_BENCH_EVENTS` | 100000 events per 50 ms window |
@@ -77,6 +78,7 @@ struct InferenceReport {
     input: String,
     provider: String,
     intra_threads: usize,
+    spin_threads: bool,
     cpu_cores_visible: usize,
     windows: usize,
     events_per_window: usize,
@@ -150,6 +152,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Path::new(WORKSPACE).join("models/evgate-S.onnx"),
     );
     let threads: usize = setting("EVGATE_BENCH_THREADS", 2);
+    let spin_threads: bool = setting("EVGATE_BENCH_SPIN", false);
     let provider: Provider = setting("EVGATE_BENCH_PROVIDER", Provider::Cpu);
     let windows: usize = setting("EVGATE_BENCH_WINDOWS", 200).max(1);
     let events_per_window: usize = setting("EVGATE_BENCH_EVENTS", 100_000).max(1);
@@ -161,6 +164,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let options = RuntimeOptions {
         provider,
         intra_threads: threads,
+        spin_threads,
         ..RuntimeOptions::default()
     };
     let mut runtime = ModelRuntime::load(&model, options)?;
@@ -248,6 +252,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         input: input.to_string(),
         provider: runtime.active_provider().to_string(),
         intra_threads: threads,
+        spin_threads,
         cpu_cores_visible: std::thread::available_parallelism().map_or(0, |n| n.get()),
         windows,
         events_per_window,
