@@ -25,28 +25,30 @@ enum Command {
     Sim(sim::SimArgs),
     /// Draw an event file (with labels, mask outlines or a suppressed stream) as PNGs or a GIF.
     Render(render::RenderArgs),
+    /// Score the model and the baselines on labelled sequences; write JSON, Markdown and plots.
+    Eval(eval::EvalArgs),
+    /// Run the pipeline (ingest → infer → gate) with a live status line and a final summary.
+    Run(run::RunArgs),
     /// Describe an event file: format, sensor, event count, times, rate, polarity, repairs.
     Info(info::InfoArgs),
     /// Convert an event file; the output format follows the extension (.csv, .raw EVT 3.0, .evg).
     Convert(convert::ConvertArgs),
-    /// Run the pipeline (ingest → infer → gate) with a live status line and a final summary.
-    Run(run::RunArgs),
-    /// Score the model and the baselines on labelled sequences; write JSON, Markdown and plots.
-    Eval(eval::EvalArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
-        .with_env_filter(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")))
+        .with_env_filter(
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
+        )
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Info(args) => info::run(args),
-        Command::Convert(args) => convert::run(args),
-        Command::Eval(args) => eval::run(args),
         Command::Sim(args) => sim::run(args),
         Command::Render(args) => render::run(args),
+        Command::Eval(args) => eval::run(args),
         Command::Run(args) => run::run(args),
+        Command::Info(args) => info::run(args),
+        Command::Convert(args) => convert::run(args),
     }
 }
