@@ -6,6 +6,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::linalg::{Mat3, RigidTransform, Vec3};
 
+/// Range of the random factor on each wobble term's amplitude.
+const AMPLITUDE_SPREAD: (f32, f32) = (0.6, 1.4);
+
 /// A sum of sinusoids: smooth motion with curves and accelerations that never repeats exactly
 /// within a sequence.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -30,12 +33,34 @@ impl Wobble {
         let terms = (0..count)
             .map(|_| {
                 let omega = std::f32::consts::TAU * rng.gen_range(min_hz..=max_hz);
-                let amplitude =
-                    peak_speed / (count as f32).sqrt() / omega * rng.gen_range(0.6..1.4);
+                let amplitude = peak_speed / (count as f32).sqrt() / omega
+                    * rng.gen_range(AMPLITUDE_SPREAD.0..AMPLITUDE_SPREAD.1);
                 (amplitude, omega, rng.gen_range(0.0..std::f32::consts::TAU))
             })
             .collect();
         Wobble { terms }
+    }
+
+    /// Like [`Wobble::random`], with the lowest frequency raised where needed so that no term's
+    /// amplitude exceeds `max_amplitude`: the motion keeps its peak speed but swings less far
+    /// (a term's amplitude is its speed over its angular frequency).
+    pub fn random_bounded(
+        count: usize,
+        peak_speed: f32,
+        max_amplitude: f32,
+        min_hz: f32,
+        max_hz: f32,
+        rng: &mut impl Rng,
+    ) -> Wobble {
+        let slowest_hz = AMPLITUDE_SPREAD.1 * peak_speed
+            / ((count.max(1) as f32).sqrt() * max_amplitude * std::f32::consts::TAU);
+        Wobble::random(
+            count,
+            peak_speed,
+            min_hz.max(slowest_hz).min(max_hz),
+            max_hz,
+            rng,
+        )
     }
 
     pub fn value(&self, t: f32) -> f32 {

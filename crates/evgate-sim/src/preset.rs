@@ -94,9 +94,9 @@ impl Preset {
         };
         let carpet = TextureStyle {
             mean: 0.35,
-            contrast: 0.6,
+            contrast: 0.8,
             noise: 1.0,
-            shape_density: 0.5,
+            shape_density: 1.0,
             stripes: 0.2,
         };
         let poster = TextureStyle {

@@ -3,13 +3,23 @@
 
 use rand::Rng;
 
+use crate::camera::project_world;
 use crate::config::{Layout, SceneParams, SimConfig};
-use crate::linalg::Vec3;
+use crate::linalg::{Mat3, RigidTransform, Vec3};
 use crate::motion::{EgoMotion, ObjectPath, Vec3Def, Wobble};
 use crate::scene::{MovingObject, Panel, Scene, Shape};
 use crate::texture::{Texture, TextureStyle};
 
 const TEXTURE_SIZE: usize = 256;
+
+/// Share of the image width and height, centred, within which the filmed object's path stays
+/// at the camera's base pose; the ego wobble (up to about a third of the field of view) then
+/// carries it towards the edges or briefly out of view, but not away for good.
+const FILMED_VIEW_SHARE: f32 = 0.6;
+
+/// Largest amplitude of one term of the camera's yaw or pitch wobble (rad); the three terms
+/// together swing the view by at most about a third of its width.
+const MAX_SWING_RAD: f32 = 0.2;
 
 /// Where moving objects may be, and whether they rest on a surface.
 struct ObjectRegion {
@@ -119,10 +129,21 @@ pub fn build_scene(config: &SimConfig, rng: &mut impl Rng) -> Scene {
     };
     let object_count =
         rng.gen_range(params.min_objects..=params.max_objects.max(params.min_objects));
+    // As in EVIMO, where the objects are filmed, the first object moves within the camera's
+    // view; the others roam the whole region and enter and leave it. Traffic needs no such
+    // rule: several cars share the road ahead.
+    let filmed = match params.layout {
+        Layout::Road => None,
+        _ => filmed_region(&region, &ego, config),
+    };
     let objects = (0..object_count)
-        .map(|_| {
+        .map(|k| {
             let texture = new_texture(&params.object_texture, rng);
-            random_object(params, &region, texture, rng)
+            let object_region = match &filmed {
+                Some(filmed) if k == 0 => filmed,
+                _ => &region,
+            };
+            random_object(params, object_region, texture, rng)
         })
         .collect();
     Scene {
@@ -135,6 +156,86 @@ pub fn build_scene(config: &SimConfig, rng: &mut impl Rng) -> Scene {
         light: Vec3::new(rng.gen_range(-0.5..0.5), -1.0, rng.gen_range(-0.8..-0.2)).normalized(),
         ambient: 0.45,
     }
+}
+
+/// The part of `region` that the camera sees, at its base pose, within the central
+/// [`FILMED_VIEW_SHARE`] of the image: `region` scaled about the point the camera looks at (on
+/// the supporting surface, or on the optical axis at the region's middle depth) as far as all
+/// its corners stay in that part of the image. `None` when that point itself is out of view.
+fn filmed_region(
+    region: &ObjectRegion,
+    ego: &EgoMotion,
+    config: &SimConfig,
+) -> Option<ObjectRegion> {
+    let [yaw, pitch, roll] = ego.base_attitude;
+    let camera = RigidTransform {
+        rotation: Mat3::from_yaw_pitch_roll(yaw, pitch, roll),
+        translation: ego.base_position.into(),
+    };
+    let axis = camera.rotation.apply(Vec3::new(0.0, 0.0, 1.0));
+    let origin = camera.translation;
+    let along_axis = match region.ground_y {
+        Some(ground) => (ground - origin.y) / axis.y,
+        None => ((region.lower.z + region.upper.z) / 2.0 - origin.z) / axis.z,
+    };
+    // NaN or infinite when the axis runs parallel to the supporting surface.
+    if !along_axis.is_finite() || along_axis <= 0.0 {
+        return None;
+    }
+    let clamp = |p: Vec3| {
+        Vec3::new(
+            p.x.clamp(region.lower.x, region.upper.x),
+            p.y.clamp(region.lower.y, region.upper.y),
+            p.z.clamp(region.lower.z, region.upper.z),
+        )
+    };
+    let centre = clamp(origin + axis * along_axis);
+    let (width, height) = (config.sensor.width as f32, config.sensor.height as f32);
+    let margin = (1.0 - FILMED_VIEW_SHARE) / 2.0;
+    let in_view = |p: Vec3| {
+        project_world(&config.intrinsics, &camera, p).is_some_and(|(x, y)| {
+            (margin * width..=(1.0 - margin) * width).contains(&x)
+                && (margin * height..=(1.0 - margin) * height).contains(&y)
+        })
+    };
+    if !in_view(centre) {
+        return None;
+    }
+    let scaled = |scale: f32| {
+        (
+            clamp(centre + (region.lower - centre) * scale),
+            clamp(centre + (region.upper - centre) * scale),
+        )
+    };
+    let corners_in_view = |(lower, upper): (Vec3, Vec3)| {
+        (0..8).all(|i| {
+            in_view(Vec3::new(
+                if i & 1 == 0 { lower.x } else { upper.x },
+                if i & 2 == 0 { lower.y } else { upper.y },
+                if i & 4 == 0 { lower.z } else { upper.z },
+            ))
+        })
+    };
+    // The view is convex and contains the centre, so the scales that fit form an interval
+    // from 0: bisect for its end.
+    let (mut fits, mut too_large) = (0.0f32, 1.0f32);
+    if corners_in_view(scaled(1.0)) {
+        fits = 1.0;
+    }
+    while fits < 1.0 && too_large - fits > 1e-3 {
+        let middle = (fits + too_large) / 2.0;
+        if corners_in_view(scaled(middle)) {
+            fits = middle;
+        } else {
+            too_large = middle;
+        }
+    }
+    let (lower, upper) = scaled(fits);
+    Some(ObjectRegion {
+        lower,
+        upper,
+        ground_y: region.ground_y,
+    })
 }
 
 /// `rand::Rng` over a `dyn RngCore`, so one closure can draw textures from the caller's generator.
@@ -163,10 +264,11 @@ fn hand_held(params: &SceneParams, pitch: f32, rng: &mut impl Rng) -> EgoMotion 
         base_position: Vec3Def([0.0, 0.0, 0.0]),
         base_attitude: [rng.gen_range(-0.15..0.15), pitch, 0.0],
         drive_velocity: Vec3Def::default(),
-        // Yaw and pitch dominate hand-held motion; roll is weaker.
+        // Yaw and pitch dominate hand-held motion; roll is weaker. Their swings are bounded
+        // because the camera films the objects: it looks around them, not away.
         attitude_wobble: [
-            Wobble::random(3, rotation, 0.15, 1.5, rng),
-            Wobble::random(3, rotation * 0.7, 0.15, 1.5, rng),
+            Wobble::random_bounded(3, rotation, MAX_SWING_RAD, 0.15, 1.5, rng),
+            Wobble::random_bounded(3, rotation * 0.7, MAX_SWING_RAD, 0.15, 1.5, rng),
             Wobble::random(2, rotation * 0.3, 0.1, 1.0, rng),
         ],
         position_wobble: [

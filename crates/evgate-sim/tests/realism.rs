@@ -113,6 +113,36 @@ fn moving_objects_cause_a_minority_of_events() {
 }
 
 #[test]
+fn every_evimo_like_sequence_films_a_moving_object_most_of_the_time() {
+    for preset in [
+        Preset::Boxes,
+        Preset::Floor,
+        Preset::Wall,
+        Preset::Table,
+        Preset::Fast,
+        Preset::Tabletop,
+    ] {
+        for seed in [1, 2, 3, 4, 5] {
+            let simulator = Simulator::new(small(preset), seed).expect("valid config");
+            // Masks every 100 ms over 3 s, the length of a small-suite sequence.
+            let frames = 30;
+            let filmed = (0..frames)
+                .filter(|i| {
+                    simulator
+                        .mask_at(50_000 + i * 100_000)
+                        .iter()
+                        .any(|&id| id != 0)
+                })
+                .count();
+            assert!(
+                filmed * 4 >= frames as usize * 3,
+                "{preset} seed {seed}: objects in view in only {filmed} of {frames} masks"
+            );
+        }
+    }
+}
+
+#[test]
 fn warping_by_ground_truth_flow_reproduces_the_later_frame() {
     let simulator = Simulator::new(small(Preset::Boxes), 8).expect("valid config");
     let sensor = simulator.sensor();
@@ -260,11 +290,18 @@ fn hot_pixels_fire_at_their_rate() {
 
 #[test]
 fn faster_motion_renders_more_often() {
-    let (slow, _) = run(small(Preset::Tabletop), 1, 200_000);
-    let (fast, _) = run(small(Preset::Fast), 1, 200_000);
+    // The same scene with every motion four times faster; at a third of the resolution the
+    // slower one moves under a pixel per `max-step-us`, so only the faster one needs more steps.
+    let config = small(Preset::Fast);
+    let mut faster = config.clone();
+    faster.scene.object_speed_mps *= 4.0;
+    faster.scene.ego_rotation_rad_s *= 4.0;
+    faster.scene.ego_translation_mps *= 4.0;
+    let (slow, _) = run(config, 1, 200_000);
+    let (fast, _) = run(faster, 1, 200_000);
     assert!(
         fast.stats().renders > 2 * slow.stats().renders,
-        "fast preset {} renders, tabletop {}",
+        "four times faster motion {} renders, original {}",
         fast.stats().renders,
         slow.stats().renders
     );
