@@ -8,11 +8,11 @@ package="${EVGATE_ORT_PACKAGE:-onnxruntime}"
 version="${EVGATE_ORT_VERSION:-1.31.1}"
 dest=.ort
 if [ -e "$dest/libonnxruntime.so" ] && [ "$(cat "$dest/VERSION" 2>/dev/null)" = "$package==$version" ]; then
-  echo "onnxruntime: $dest/libonnxruntime.so ($package==$version) already present"
+  echo "onnxruntime: $dest/libonnxruntime.so ($package==$version) already present" >&2
   exit 0
 fi
 rm -rf "$dest" && mkdir -p "$dest/wheel"
-echo "onnxruntime: downloading $package==$version from PyPI"
+echo "onnxruntime: downloading $package==$version from PyPI" >&2
 python3 -m pip download --quiet --no-deps --only-binary=:all: -d "$dest/wheel" "$package==$version"
 wheel=$(ls "$dest"/wheel/*.whl)
 python3 - "$wheel" "$dest" <<'PY'
@@ -29,4 +29,4 @@ lib=$(ls "$dest"/libonnxruntime.so.1.* | head -n 1)
 ln -sf "$(basename "$lib")" "$dest/libonnxruntime.so"
 rm -rf "$dest/wheel"
 echo "$package==$version" > "$dest/VERSION"
-echo "onnxruntime: installed $lib"
+echo "onnxruntime: installed $lib" >&2
