@@ -12,6 +12,8 @@ echo "== cargo fmt --check"
 cargo fmt --all --check
 echo "== cargo clippy"
 cargo clippy --workspace --all-targets -- -D warnings
+echo "== cargo build of the fuzz targets (fuzz/, its own workspace)"
+cargo build --manifest-path fuzz/Cargo.toml
 echo "== cargo test"
 cargo test --workspace
 echo "== pytest (models/training)"

@@ -2,22 +2,7 @@
 //! hang or allocate without bound.
 #![no_main]
 
-use evgate_core::SensorSize;
-use evgate_io::reader::from_bytes;
 use evgate_io::Format;
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| {
-    // A size is given so inputs whose header lacks one still reach the event decoder.
-    let sensor = Some(SensorSize::new(1280, 720));
-    let Ok(mut reader) = from_bytes("fuzz-input", data.to_vec(), Format::Evt2, sensor) else {
-        return;
-    };
-    let mut chunk = Vec::new();
-    while let Ok(count) = reader.read_chunk(&mut chunk) {
-        if count == 0 {
-            break;
-        }
-        assert!(chunk.iter().all(|event| reader.sensor_size().contains(event)));
-    }
-});
+fuzz_target!(|data: &[u8]| evgate_io_fuzz::decode_arbitrary_bytes(data, Format::Evt2));
