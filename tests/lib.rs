@@ -83,6 +83,23 @@ pub fn binary(package: &str, binary: &str) -> Result<PathBuf, HarnessError> {
     Ok(binary_directory().join(binary))
 }
 
+/// Starts the service binary of `package` (named like the package) on the pipeline `names`,
+/// with `args` after the `--domain` and `--camera` that every service takes.
+pub fn start_service(
+    package: &str,
+    names: &PipelineNames,
+    args: &[&str],
+) -> Result<Process, HarnessError> {
+    let program = binary(package, package)?;
+    let pipeline = [
+        "--domain",
+        names.domain.as_str(),
+        "--camera",
+        names.camera.as_str(),
+    ];
+    Process::start(&program, &[&pipeline[..], args].concat())
+}
+
 /// Pipeline names no other test (or test run) uses.
 pub fn unique_names(test: &str) -> PipelineNames {
     let nanos = std::time::SystemTime::now()

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use evgate_core::{BitMask, Event, SensorSize};
-use evgate_e2e::{binary, u64_at, unique_names, wait_until, Process};
+use evgate_e2e::{start_service, u64_at, unique_names, wait_until, Process};
 use evgate_ipc::{
     create_node, BatchFlags, BatchHeader, ForecastHeader, LatestSubscriber, PipelineNames,
     PipelineStats, Qos, SlicePublisher, SliceSubscriber, Stream,
@@ -51,19 +51,18 @@ impl Harness {
     }
 
     fn start_gate(&self, extra: &[&str]) -> Process {
-        let gate = binary("evgate-gate", "evgate-gate").unwrap();
-        let mut args = vec![
-            "--domain",
-            &self.names.domain,
-            "--camera",
-            &self.names.camera,
+        let until_end_of_stream = [
             "--exit-at-end-of-stream",
             "--json",
             "--stats-interval-ms",
             "10",
         ];
-        args.extend_from_slice(extra);
-        let process = Process::start(&gate, &args).unwrap();
+        let process = start_service(
+            "evgate-gate",
+            &self.names,
+            &[&until_end_of_stream[..], extra].concat(),
+        )
+        .unwrap();
         wait_until("the gate subscribing to the events", TIMEOUT, || {
             self.events.subscriber_count() == 1
         })

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use evgate_e2e::{binary, unique_names, wait_until, workspace_root, Process};
+use evgate_e2e::{start_service, unique_names, wait_until, workspace_root};
 use evgate_ipc::{create_node, LatestSubscriber, PipelineStats, Stream};
 
 const TIMEOUT: Duration = Duration::from_secs(120);
@@ -29,39 +29,25 @@ fn killing_infer_leaves_the_gate_on_its_policy_and_a_new_infer_takes_over() {
     let names = unique_names("failover");
     let node = create_node("failover-test").unwrap();
     let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats).unwrap();
-    let common = [
-        "--domain",
-        names.domain.as_str(),
-        "--camera",
-        names.camera.as_str(),
-    ];
-    let infer_binary = binary("evgate-infer", "evgate-infer").unwrap();
-    let start_infer =
-        || Process::start(&infer_binary, &[&common[..], &["--model", model]].concat()).unwrap();
+    let start_infer = || start_service("evgate-infer", &names, &["--model", model]).unwrap();
 
-    let mut gate = Process::start(
-        &binary("evgate-gate", "evgate-gate").unwrap(),
+    let mut gate = start_service(
+        "evgate-gate",
+        &names,
         &[
-            &common[..],
-            &[
-                "--no-forecast",
-                "pass",
-                "--stats-interval-ms",
-                "20",
-                "--json",
-            ],
-        ]
-        .concat(),
+            "--no-forecast",
+            "pass",
+            "--stats-interval-ms",
+            "20",
+            "--json",
+        ],
     )
     .unwrap();
     let mut infer = start_infer();
-    let mut ingest = Process::start(
-        &binary("evgate-ingest", "evgate-ingest").unwrap(),
-        &[
-            &common[..],
-            &["--sim-duration-s", "30", "--wait-for-subscribers", "2"],
-        ]
-        .concat(),
+    let mut ingest = start_service(
+        "evgate-ingest",
+        &names,
+        &["--sim-duration-s", "30", "--wait-for-subscribers", "2"],
     )
     .unwrap();
 

@@ -4,7 +4,7 @@
 use std::process::Command;
 use std::time::Duration;
 
-use evgate_e2e::{binary, u64_at, unique_names, wait_until, workspace_root, Process};
+use evgate_e2e::{start_service, u64_at, unique_names, wait_until, workspace_root, Process};
 use evgate_ipc::{create_node, BatchHeader, Qos, SlicePublisher, Stream};
 
 const TIMEOUT: Duration = Duration::from_secs(90);
@@ -23,16 +23,10 @@ fn python_consumer_receives_every_kept_event() {
     let python = String::from_utf8(setup.stdout).unwrap().trim().to_owned();
 
     let names = unique_names("python");
-    let mut gate = Process::start(
-        &binary("evgate-gate", "evgate-gate").unwrap(),
-        &[
-            "--domain",
-            &names.domain,
-            "--camera",
-            &names.camera,
-            "--json",
-            "--exit-at-end-of-stream",
-        ],
+    let mut gate = start_service(
+        "evgate-gate",
+        &names,
+        &["--json", "--exit-at-end-of-stream"],
     )
     .unwrap();
     let mut consumer = Process::start(
@@ -64,13 +58,10 @@ fn python_consumer_receives_every_kept_event() {
     })
     .unwrap();
 
-    let mut ingest = Process::start(
-        &binary("evgate-ingest", "evgate-ingest").unwrap(),
+    let mut ingest = start_service(
+        "evgate-ingest",
+        &names,
         &[
-            "--domain",
-            &names.domain,
-            "--camera",
-            &names.camera,
             "--json",
             "--fast",
             "--sim-duration-s",

@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use evgate_e2e::{binary, u64_at, unique_names, workspace_root, Process};
+use evgate_e2e::{start_service, u64_at, unique_names, workspace_root};
 
 const TIMEOUT: Duration = Duration::from_secs(90);
 
@@ -14,25 +14,16 @@ fn a_real_evt3_recording_reaches_the_gate_event_for_event_at_its_own_pace() {
     let span_s = (decoded.last().unwrap().t - decoded[0].t) as f64 * 1e-6;
 
     let names = unique_names("replay");
-    let mut gate = Process::start(
-        &binary("evgate-gate", "evgate-gate").unwrap(),
-        &[
-            "--domain",
-            &names.domain,
-            "--camera",
-            &names.camera,
-            "--json",
-            "--exit-at-end-of-stream",
-        ],
+    let mut gate = start_service(
+        "evgate-gate",
+        &names,
+        &["--json", "--exit-at-end-of-stream"],
     )
     .unwrap();
-    let mut ingest = Process::start(
-        &binary("evgate-ingest", "evgate-ingest").unwrap(),
+    let mut ingest = start_service(
+        "evgate-ingest",
+        &names,
         &[
-            "--domain",
-            &names.domain,
-            "--camera",
-            &names.camera,
             "--json",
             "--input",
             recording.to_str().unwrap(),
@@ -75,13 +66,10 @@ fn a_looping_replay_runs_until_sigint_and_then_ends_the_stream_cleanly() {
         evgate_ipc::Stream::Stats,
     )
     .unwrap();
-    let mut gate = Process::start(
-        &binary("evgate-gate", "evgate-gate").unwrap(),
+    let mut gate = start_service(
+        "evgate-gate",
+        &names,
         &[
-            "--domain",
-            &names.domain,
-            "--camera",
-            &names.camera,
             "--json",
             "--exit-at-end-of-stream",
             "--stats-interval-ms",
@@ -89,13 +77,10 @@ fn a_looping_replay_runs_until_sigint_and_then_ends_the_stream_cleanly() {
         ],
     )
     .unwrap();
-    let mut ingest = Process::start(
-        &binary("evgate-ingest", "evgate-ingest").unwrap(),
+    let mut ingest = start_service(
+        "evgate-ingest",
+        &names,
         &[
-            "--domain",
-            &names.domain,
-            "--camera",
-            &names.camera,
             "--json",
             "--fast",
             "--loop",

@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use evgate_core::Event;
-use evgate_e2e::{binary, u64_at, unique_names, wait_until, Process};
+use evgate_e2e::{start_service, u64_at, unique_names, wait_until, Process};
 use evgate_ipc::{
     create_node, BatchHeader, LatestSubscriber, PipelineNames, PipelineStats, Qos, SlicePublisher,
     SliceSubscriber, Stream,
@@ -13,25 +13,11 @@ use evgate_ipc::{
 const TIMEOUT: Duration = Duration::from_secs(90);
 
 fn start_gate(names: &PipelineNames, extra: &[&str]) -> Process {
-    let gate = binary("evgate-gate", "evgate-gate").unwrap();
-    let mut args = vec![
-        "--domain",
-        &names.domain,
-        "--camera",
-        &names.camera,
-        "--json",
-    ];
-    args.extend_from_slice(extra);
-    Process::start(&gate, &args).unwrap()
+    start_service("evgate-gate", names, &[&["--json"], extra].concat()).unwrap()
 }
 
 fn start_ingest(names: &PipelineNames, sim_seconds: &str, extra: &[&str]) -> Process {
-    let ingest = binary("evgate-ingest", "evgate-ingest").unwrap();
-    let mut args = vec![
-        "--domain",
-        &names.domain,
-        "--camera",
-        &names.camera,
+    let fast_simulation = [
         "--json",
         "--fast",
         "--sim-duration-s",
@@ -39,8 +25,12 @@ fn start_ingest(names: &PipelineNames, sim_seconds: &str, extra: &[&str]) -> Pro
         "--wait-for-subscribers",
         "1",
     ];
-    args.extend_from_slice(extra);
-    Process::start(&ingest, &args).unwrap()
+    start_service(
+        "evgate-ingest",
+        names,
+        &[&fast_simulation[..], extra].concat(),
+    )
+    .unwrap()
 }
 
 /// Counts the subscribers of the events stream through a publisher of our own.
