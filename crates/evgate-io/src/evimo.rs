@@ -21,7 +21,7 @@ const RECORD_BYTES: usize = 32;
 const BLOCKS_IN_FLIGHT: usize = 4;
 
 /// Reads one zip member as a stream, inflated on a helper thread.
-struct MemberStream {
+pub(crate) struct MemberStream {
     blocks: Receiver<std::io::Result<Vec<u8>>>,
     block: Vec<u8>,
     position: usize,
@@ -45,7 +45,7 @@ impl Read for MemberStream {
     }
 }
 
-fn open_member(path: &Path, member: &str) -> Result<Option<MemberStream>, DecodeError> {
+pub(crate) fn open_member(path: &Path, member: &str) -> Result<Option<MemberStream>, DecodeError> {
     let file = File::open(path).map_err(|source| DecodeError::Open {
         path: path.to_path_buf(),
         source,

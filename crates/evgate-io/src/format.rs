@@ -26,6 +26,10 @@ pub enum Format {
     Native,
     /// EVIMO `.npz` (`events` array of `[t s, x, y, p]` rows).
     EvimoNpz,
+    /// EVIMO2 v2 sequence folder (`dataset_events_t.npy`, `_xy`, `_p`).
+    Evimo2Folder,
+    /// DSEC `events.h5` (HDF5; read when built with the `dsec` feature).
+    Dsec,
 }
 
 impl Format {
@@ -38,6 +42,8 @@ impl Format {
             Format::Csv => "csv",
             Format::Native => "evg",
             Format::EvimoNpz => "evimo-npz",
+            Format::Evimo2Folder => "evimo2-folder",
+            Format::Dsec => "dsec-h5",
         }
     }
 
@@ -59,6 +65,9 @@ impl std::fmt::Display for Format {
     }
 }
 
+/// The HDF5 superblock signature (at byte 0: DSEC files have no user block).
+pub const HDF5_MAGIC: [u8; 8] = *b"\x89HDF\r\n\x1a\n";
+
 fn extension(path: &Path) -> Option<String> {
     path.extension()
         .and_then(|e| e.to_str())
@@ -67,6 +76,19 @@ fn extension(path: &Path) -> Option<String> {
 
 /// Detects the format from the magic bytes, then the `%` header, then the extension.
 pub fn detect(path: &Path) -> Result<Format, DecodeError> {
+    if path.is_dir() {
+        return if path.join(crate::evimo2_events::TIMES_FILE).is_file() {
+            Ok(Format::Evimo2Folder)
+        } else {
+            Err(DecodeError::Unrecognised {
+                path: path.to_path_buf(),
+                problem: format!(
+                    "a folder, and not an EVIMO2 sequence (no {})",
+                    crate::evimo2_events::TIMES_FILE
+                ),
+            })
+        };
+    }
     let file = std::fs::File::open(path).map_err(|source| DecodeError::Open {
         path: path.to_path_buf(),
         source,
@@ -90,6 +112,7 @@ fn detect_from(path: &Path, source: &mut ByteSource) -> Result<Format, DecodeErr
             .map(<[u8]>::to_vec);
         match magic.as_deref() {
             Some(m) if m == crate::native::MAGIC => return Ok(Format::Native),
+            Some(m) if m == HDF5_MAGIC => return Ok(Format::Dsec),
             Some(m) if m == &crate::aedat4::MAGIC[..8] => return Ok(Format::Aedat4),
             _ => {}
         }
@@ -119,9 +142,10 @@ fn detect_from(path: &Path, source: &mut ByteSource) -> Result<Format, DecodeErr
         Some("raw") => Err(unrecognised("a RAW file must start with a `%` header".into())),
         Some("aedat4") => Err(unrecognised("an AEDAT 4 file must start with `#!AER-DAT4.0`".into())),
         Some("evg") => Err(unrecognised("an .evg file must start with the .evg magic".into())),
+        Some("h5" | "hdf5") => Err(unrecognised("an HDF5 file must start with the HDF5 signature \\x89HDF\\r\\n\\x1a\\n".into())),
         _ if first.is_none() => Err(unrecognised("the file is empty and its extension names no format".into())),
         other => Err(unrecognised(format!(
-            "format not recognised from the first bytes nor the extension {:?} (accepted: .raw EVT 2.0/3.0, .dat, .aedat4, .csv/.txt, .evg, EVIMO .npz)",
+            "format not recognised from the first bytes nor the extension {:?} (accepted: .raw EVT 2.0/3.0, .dat, .aedat4, .csv/.txt, .evg, EVIMO .npz, EVIMO2 folder, DSEC .h5)",
             other.unwrap_or_default()
         ))),
     }
@@ -158,6 +182,10 @@ mod tests {
             Format::Dat
         );
         assert_eq!(detect_bytes("a.txt", b"0.1 1 2 0\n").unwrap(), Format::Csv);
+        assert_eq!(
+            detect_bytes("events.h5", b"\x89HDF\r\n\x1a\n\x00\x00").unwrap(),
+            Format::Dsec
+        );
         assert_eq!(
             detect_bytes("a.csv", b"# comment\n1,2,3,1\n").unwrap(),
             Format::Csv

@@ -12,6 +12,8 @@ pub mod csv_writer;
 pub mod dat;
 pub mod error;
 pub mod evimo;
+pub mod evimo2_events;
+pub mod evimo_recording;
 pub mod evt2;
 pub mod evt3;
 pub mod evt3_writer;
@@ -22,6 +24,8 @@ pub mod native;
 pub mod native_writer;
 pub mod npy;
 pub mod npz;
+pub mod pickle;
+pub mod pyvalue;
 pub mod reader;
 pub mod report;
 pub mod sequence;
@@ -29,6 +33,9 @@ pub mod source;
 pub mod writer;
 
 pub use error::DecodeError;
+pub use evimo_recording::{
+    EvimoError, EvimoLayout, EvimoRecording, GtFrame, GtFrameInfo, GtFrames,
+};
 pub use format::{detect, Format};
 pub use reader::{open, open_with, read_all, EventReader, OpenOptions};
 pub use report::DecodeReport;

@@ -32,6 +32,8 @@ pub enum NpyError {
     UnsupportedDType(String),
     #[error("the data ends after {found} bytes, the header announces {expected}")]
     Truncated { expected: usize, found: usize },
+    #[error("the pickled object is larger than {limit} bytes")]
+    ObjectTooLarge { limit: u64 },
     #[error("shape {shape:?} overflows the address space")]
     ShapeOverflow { shape: Vec<usize> },
 }
@@ -87,6 +89,8 @@ pub struct RecordField {
 pub enum DType {
     Scalar(String),
     Record(Vec<RecordField>),
+    /// `|O`: Python objects; the data is a pickle (see [`read_pickled_object`]).
+    Object,
 }
 
 impl DType {
@@ -95,6 +99,9 @@ impl DType {
         match self {
             DType::Scalar(descr) => scalar_size(descr),
             DType::Record(fields) => Ok(fields.iter().map(|f| f.size).sum()),
+            DType::Object => Err(NpyError::UnsupportedDType(
+                "|O (an object array is a pickle: read it with read_pickled_object)".into(),
+            )),
         }
     }
 }
@@ -103,6 +110,7 @@ impl std::fmt::Display for DType {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             DType::Scalar(descr) => f.write_str(descr),
+            DType::Object => f.write_str("|O"),
             DType::Record(fields) => {
                 f.write_str("[")?;
                 for (i, field) in fields.iter().enumerate() {
@@ -242,6 +250,7 @@ impl NpyArray {
         };
         let descr = match &self.dtype {
             DType::Scalar(descr) => format!("'{descr}'"),
+            DType::Object => "'|O'".to_owned(),
             record => record.to_string(),
         };
         let mut dict = format!("{{'descr': {descr}, 'fortran_order': False, 'shape': {shape}, }}");
@@ -307,6 +316,24 @@ pub fn read_header(reader: &mut impl Read) -> Result<NpyHeader, NpyError> {
     }
     let text = String::from_utf8_lossy(&text).into_owned();
     HeaderParser::new(&text).parse()
+}
+
+/// The pickle bytes of an object array (`np.save(..., allow_pickle=True)`), at most
+/// `max_bytes` long. Unpickle them with [`crate::pickle::read_pickle`].
+pub fn read_pickled_object(reader: &mut impl Read, max_bytes: u64) -> Result<Vec<u8>, NpyError> {
+    let header = read_header(reader)?;
+    if header.dtype != DType::Object {
+        return Err(NpyError::DType {
+            expected: "|O".into(),
+            found: header.dtype.to_string(),
+        });
+    }
+    let mut data = Vec::new();
+    reader.take(max_bytes + 1).read_to_end(&mut data)?;
+    if data.len() as u64 > max_bytes {
+        return Err(NpyError::ObjectTooLarge { limit: max_bytes });
+    }
+    Ok(data)
 }
 
 fn read_prefix(reader: &mut impl Read, buf: &mut [u8]) -> Result<(), NpyError> {
@@ -424,6 +451,7 @@ impl<'a> HeaderParser<'a> {
             _ => return Err(self.fail("`shape` missing or not a tuple")),
         };
         let dtype = match descr {
+            Some(Literal::Str(descr)) if descr == "|O" => DType::Object,
             Some(Literal::Str(descr)) => {
                 scalar_size(&descr)?;
                 DType::Scalar(descr)

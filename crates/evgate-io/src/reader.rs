@@ -9,6 +9,8 @@ use crate::csv::CsvDecoder;
 use crate::dat::DatDecoder;
 use crate::error::DecodeError;
 use crate::evimo::EvimoDecoder;
+use crate::evimo2_events::Evimo2EventsDecoder;
+use crate::evimo_recording::{EvimoError, EvimoRecording};
 use crate::evt2::Evt2Decoder;
 use crate::evt3::Evt3Decoder;
 use crate::format::{detect, Format};
@@ -59,6 +61,7 @@ event_reader!(Aedat4Decoder, Format::Aedat4);
 event_reader!(CsvDecoder, Format::Csv);
 event_reader!(NativeDecoder, Format::Native);
 event_reader!(EvimoDecoder, Format::EvimoNpz);
+event_reader!(Evimo2EventsDecoder, Format::Evimo2Folder);
 
 /// Header key of the time offset our EVT 3.0 encoder declares (see `evt3_writer`).
 const EVT3_TIME_OFFSET_KEY: &str = "evgate_time_offset_us";
@@ -89,9 +92,12 @@ pub fn open_with(
         Some(format) => format,
         None => detect(path)?,
     };
-    if format == Format::EvimoNpz {
-        // A zip is read by member, not as one byte stream.
-        return Ok(Box::new(EvimoDecoder::open(path, options.sensor_size)?));
+    match format {
+        // A zip is read by member, a folder by file, HDF5 by dataset: not as one byte stream.
+        Format::EvimoNpz => return Ok(Box::new(EvimoDecoder::open(path, options.sensor_size)?)),
+        Format::Evimo2Folder => return open_evimo2_folder(path, options),
+        Format::Dsec => return open_dsec(path, options),
+        _ => {}
     }
     let file = std::fs::File::open(path).map_err(|source| DecodeError::Open {
         path: path.to_path_buf(),
@@ -156,14 +162,55 @@ fn from_source(
             options.sensor_size.unwrap_or(UNBOUNDED_SENSOR),
         )),
         Format::Native => Box::new(NativeDecoder::new(source)?),
-        Format::EvimoNpz => {
+        Format::EvimoNpz | Format::Evimo2Folder | Format::Dsec => {
             return Err(DecodeError::Unrecognised {
                 path: source.path().to_path_buf(),
-                problem:
-                    "EVIMO .npz files are read from a path (zip members), not from a byte stream"
-                        .into(),
+                problem: format!(
+                    "{format} inputs are read from a path (zip members, files of a folder, HDF5 datasets), not from a byte stream"
+                ),
             })
         }
+    })
+}
+
+/// The events of an EVIMO2 sequence folder; the sensor size comes from its metadata unless
+/// given.
+fn open_evimo2_folder(
+    path: &Path,
+    options: &OpenOptions,
+) -> Result<Box<dyn EventReader>, DecodeError> {
+    let sensor_size = match options.sensor_size {
+        Some(size) => size,
+        None => EvimoRecording::open(path)
+            .map_err(|e| match e {
+                EvimoError::Decode(decode) => decode,
+                other => {
+                    let message = other.to_string();
+                    let prefix = format!("{}: ", path.display());
+                    DecodeError::Unrecognised {
+                        path: path.to_path_buf(),
+                        problem: message.strip_prefix(&prefix).unwrap_or(&message).to_owned(),
+                    }
+                }
+            })?
+            .sensor_size(),
+    };
+    Ok(Box::new(Evimo2EventsDecoder::open(path, sensor_size)?))
+}
+
+#[cfg(feature = "dsec")]
+fn open_dsec(path: &Path, options: &OpenOptions) -> Result<Box<dyn EventReader>, DecodeError> {
+    Ok(Box::new(crate::dsec::DsecReader::open(
+        path,
+        options.sensor_size,
+    )?))
+}
+
+#[cfg(not(feature = "dsec"))]
+fn open_dsec(path: &Path, _options: &OpenOptions) -> Result<Box<dyn EventReader>, DecodeError> {
+    Err(DecodeError::Unrecognised {
+        path: path.to_path_buf(),
+        problem: "an HDF5 (DSEC events.h5) file, but this build has no HDF5 support: rebuild with `--features dsec` (evgate-io) or `cargo build -p evgate --features dsec`, after `bash scripts/setup-hdf5.sh`".into(),
     })
 }
 
