@@ -21,6 +21,8 @@ pub enum ConfigError {
     EmptySweep { field: &'static str },
     #[error("window-ms must be > 0, got 0")]
     Window,
+    #[error("camera-frame-tolerance-ms must be finite and ≥ 0, got {0}")]
+    FrameTolerance(f64),
 }
 
 /// The OMS parameter grid searched for the best setting.
@@ -87,6 +89,10 @@ pub struct EvalConfig {
     pub event_bins_per_decade: u32,
     /// Only the first this-many seconds of each sequence are scored (all when absent).
     pub max_seconds_per_sequence: Option<f64>,
+    /// Recordings with masks at camera frame times (EVIMO): the frame nearest to t + Δt is the
+    /// truth at t + Δt when it lies at most this far away (half the 10 ms horizon step, so no
+    /// frame stands in for a horizon nearer another one). The simulator's exact grid uses 0.5.
+    pub camera_frame_tolerance_ms: f64,
 }
 
 impl Default for EvalConfig {
@@ -103,6 +109,7 @@ impl Default for EvalConfig {
             speed_bucket_edges_px_per_s: vec![90.0, 120.0, 240.0, 480.0],
             event_bins_per_decade: 2,
             max_seconds_per_sequence: None,
+            camera_frame_tolerance_ms: 5.0,
         }
     }
 }
@@ -120,6 +127,10 @@ impl EvalConfig {
         }
         if self.window_ms == 0 {
             return Err(ConfigError::Window);
+        }
+        let tolerance = self.camera_frame_tolerance_ms;
+        if !tolerance.is_finite() || tolerance < 0.0 {
+            return Err(ConfigError::FrameTolerance(tolerance));
         }
         let last = *self.horizons_ms.last().expect("checked non-empty");
         if self.gate_span_ms == 0 || self.gate_span_ms > last {
@@ -152,6 +163,10 @@ impl EvalConfig {
             }
         }
         Ok(())
+    }
+
+    pub fn camera_frame_tolerance_us(&self) -> i64 {
+        (self.camera_frame_tolerance_ms * 1000.0).round() as i64
     }
 
     pub fn horizons_us(&self) -> Vec<i64> {
@@ -228,6 +243,21 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("headline-horizon-ms 55"));
+    }
+
+    #[test]
+    fn camera_frame_tolerance_must_be_a_distance() {
+        let config: EvalConfig =
+            serde_json::from_str(r#"{"camera-frame-tolerance-ms": 12.5}"#).unwrap();
+        assert_eq!(config.camera_frame_tolerance_us(), 12_500);
+        let negative = EvalConfig {
+            camera_frame_tolerance_ms: -1.0,
+            ..EvalConfig::default()
+        };
+        assert_eq!(
+            negative.validate().unwrap_err().to_string(),
+            "camera-frame-tolerance-ms must be finite and ≥ 0, got -1"
+        );
     }
 
     #[test]

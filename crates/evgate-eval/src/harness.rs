@@ -3,14 +3,13 @@
 //! collects the per-sequence, per-preset and overall summaries.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use evgate_core::{
     events_in, BitMask, ForecastView, GateError, GateMode, MaskError, SensorSize, TimeSpan,
     VoxelError, VoxelGrid, WindowError,
 };
-use evgate_io::sequence::LabelledSequence;
 use evgate_model::{ModelError, ModelRuntime};
 use thiserror::Error;
 
@@ -18,14 +17,15 @@ use crate::binned::{BinnedMeans, LogBins, EVENT_BINS_FIRST_DECADE, EVENT_BINS_LA
 use crate::config::{ConfigError, EvalConfig};
 use crate::event_scores::EventConfusion;
 use crate::instances::match_instances;
+use crate::kept::KeptCounts;
 use crate::linear::extrapolate;
 use crate::method::{MethodInfo, MethodKind};
 use crate::oms::{
     event_presence, normalised_response, oms_mask, threshold_response, OmsParameters,
 };
+use crate::recording::{GroundTruth, Recording};
 use crate::report::{OmsSweepResult, PresetResult, Report, SequenceResult, SweepScores};
 use crate::segmentation::{PixelConfusion, SegmentationError};
-use crate::sequence::SequenceView;
 use crate::summary::{HorizonAccumulator, Mean, MethodAccumulator, MethodSummary};
 
 #[derive(Debug, Error)]
@@ -39,7 +39,8 @@ pub enum HarnessError {
     },
     #[error(
         "model {model} expects a {expected} input but {sequence} has a {sensor} sensor (padded to \
-         {padded}); evaluate it on sequences of its resolution"
+         {padded}, larger than the model's input); export the model for at least {padded} \
+         (models/training: python -m evgate_train.export --height H --width W)"
     )]
     InputSize {
         model: String,
@@ -77,16 +78,6 @@ pub enum HarnessError {
         reference_us: i64,
         source: GateError,
     },
-    #[error(
-        "{sequence}: {field} has {actual} entries but the sequence has {expected} events \
-         (labels are needed for per-event scores)"
-    )]
-    Labels {
-        sequence: String,
-        field: &'static str,
-        actual: usize,
-        expected: usize,
-    },
     #[error("no sequence was evaluated")]
     NothingEvaluated,
 }
@@ -106,7 +97,8 @@ struct MethodOutput {
 
 /// Everything the scorer needs about one reference time.
 struct ReferenceTruth<'a> {
-    now: &'a [u8],
+    /// `None` for a recording without masks.
+    now: Option<&'a [u8]>,
     at_horizon: Vec<Option<&'a [u8]>>,
     presence: Vec<bool>,
     events_in_window: usize,
@@ -146,7 +138,13 @@ impl Evaluation {
         ];
         for (index, model) in models.iter().enumerate() {
             let metadata = model.runtime.metadata();
-            methods.push(MethodInfo::model(index, &model.label, metadata, &config));
+            methods.push(MethodInfo::model(
+                index,
+                &model.label,
+                model.runtime.model_path(),
+                metadata,
+                &config,
+            ));
         }
         methods.push(MethodInfo::oracle(&config));
         let event_bins = LogBins {
@@ -182,42 +180,33 @@ impl Evaluation {
         &self.methods
     }
 
-    /// Reference times that [`Self::evaluate_sequence`] will score for this sequence.
-    pub fn reference_count(&self, sequence: &LabelledSequence, path: &Path) -> usize {
-        SequenceView::new(sequence, path)
-            .reference_times(&self.config)
-            .len()
+    /// Reference times that [`Self::evaluate`] will score for this recording.
+    pub fn reference_count(&self, recording: &Recording) -> usize {
+        recording.reference_times(&self.config).len()
     }
 
-    /// Scores one sequence; `on_reference` is called after each reference time (progress).
-    pub fn evaluate_sequence(
+    /// Scores one recording; `on_reference` is called after each reference time (progress).
+    /// Metrics that need ground truth the recording lacks are left undefined (`None`).
+    pub fn evaluate(
         &mut self,
-        sequence: &LabelledSequence,
-        path: &Path,
+        recording: &Recording,
         mut on_reference: impl FnMut(),
     ) -> Result<&SequenceResult, HarnessError> {
-        let view = SequenceView::new(sequence, path);
-        let size = sequence.sensor_size;
-        if sequence.labels.len() != sequence.events.len() {
-            return Err(HarnessError::Labels {
-                sequence: view.name.clone(),
-                field: "events_label",
-                actual: sequence.labels.len(),
-                expected: sequence.events.len(),
-            });
-        }
+        let name = recording.name.as_str();
+        let size = recording.sensor_size;
         let mut voxel = VoxelGrid::new(size, 2).map_err(|source| HarnessError::Voxel {
-            sequence: view.name.clone(),
+            sequence: name.to_owned(),
             source,
         })?;
         for model in &mut self.models {
             let expected = model.runtime.input_size();
-            if expected != voxel.padded() {
+            let padded = voxel.padded();
+            if expected.width < padded.width || expected.height < padded.height {
                 return Err(HarnessError::InputSize {
                     model: model.label.clone(),
-                    sequence: view.name.clone(),
+                    sequence: name.to_owned(),
                     sensor: size,
-                    padded: voxel.padded(),
+                    padded,
                     expected,
                 });
             }
@@ -236,6 +225,7 @@ impl Evaluation {
         let window_us = i64::from(config.window_ms) * 1000;
         let gate_span_us = i64::from(config.gate_span_ms) * 1000;
         let headline = config.headline_index();
+        let ground_truth = recording.ground_truth();
         let mut accumulators: Vec<MethodAccumulator> = self
             .methods
             .iter()
@@ -244,24 +234,27 @@ impl Evaluation {
         let mut sweep: Vec<(HorizonAccumulator, Mean)> =
             vec![Default::default(); self.sweep_settings.len()];
         let mut previous_current: Option<(i64, Vec<bool>)> = None;
-        let references = view.reference_times(&config);
+        let references = recording.reference_times(&config);
+        let gating_horizons: Vec<usize> = (0..horizons_us.len())
+            .filter(|&k| horizons_us[k] <= gate_span_us)
+            .collect();
 
         for &reference_us in &references {
             let scoring_error = |source| HarnessError::Scoring {
-                sequence: view.name.clone(),
+                sequence: name.to_owned(),
                 reference_us,
                 source,
             };
             let span = TimeSpan::new(reference_us - window_us, reference_us).map_err(|source| {
                 HarnessError::Window {
-                    sequence: view.name.clone(),
+                    sequence: name.to_owned(),
                     reference_us,
                     source,
                 }
             })?;
             // The window [t − 50 ms, t] includes its end, as the voxel grid does.
             let window = events_in(
-                &sequence.events,
+                &recording.events,
                 TimeSpan {
                     start: span.start,
                     end: span.end + 1,
@@ -269,18 +262,20 @@ impl Evaluation {
             );
 
             // The recurrent state must see every window, even one we cannot score.
+            voxel.clear();
+            voxel.accumulate(window, span);
+            voxel.normalise();
             let mut model_outputs = Vec::with_capacity(self.models.len());
             for model in &mut self.models {
-                voxel.clear();
-                voxel.accumulate(window, span);
-                voxel.normalise();
-                let output = model
-                    .runtime
-                    .forecast(voxel.as_slice(), &horizons_ms_f32)
-                    .map_err(|source| HarnessError::Model {
-                        path: model.runtime.model_path().to_path_buf(),
-                        source: Box::new(source),
-                    })?;
+                let input = fit_to_model(&voxel, model.runtime.input_size());
+                let output =
+                    model
+                        .runtime
+                        .forecast(&input, &horizons_ms_f32)
+                        .map_err(|source| HarnessError::Model {
+                            path: model.runtime.model_path().to_path_buf(),
+                            source: Box::new(source),
+                        })?;
                 let stride = output.width();
                 let crop = |logits: &[f32]| crop_logits(logits, stride, size);
                 model_outputs.push(MethodOutput {
@@ -290,51 +285,58 @@ impl Evaluation {
                 });
             }
 
-            let Some(now) = view.truth_at(reference_us) else {
+            let now = recording.truth_at(reference_us);
+            // A recording with masks is scored only where a mask lies at t.
+            if ground_truth.has_masks() && now.is_none() {
                 on_reference();
                 continue;
-            };
+            }
             let truth = ReferenceTruth {
                 now,
                 at_horizon: horizons_us
                     .iter()
-                    .map(|&h| view.truth_at(reference_us + h))
+                    .map(|&h| recording.truth_at(reference_us + h))
                     .collect(),
                 presence: event_presence(window, size),
                 events_in_window: window.len(),
-                speed_px_per_s: view.object_speed_px_per_s(reference_us),
+                speed_px_per_s: recording.object_speed_px_per_s(reference_us),
             };
 
-            let (current_source, source_runtime) = match model_outputs.first() {
-                Some(output) => (output.current.clone(), output.runtime),
-                None => (now.iter().map(|&id| id != 0).collect(), Duration::ZERO),
+            let current_source = match (model_outputs.first(), now) {
+                (Some(output), _) => Some((output.current.clone(), output.runtime)),
+                (None, Some(now)) => Some((to_mask(now), Duration::ZERO)),
+                (None, None) => None,
             };
-            let mut outputs: Vec<MethodOutput> = Vec::with_capacity(self.methods.len());
+            let mut outputs: Vec<Option<MethodOutput>> = Vec::with_capacity(self.methods.len());
             for method in &self.methods {
                 let output = match method.kind {
                     MethodKind::Oms(parameters) => {
                         let started = Instant::now();
                         let mask = oms_mask(window, size, &parameters);
                         let runtime = started.elapsed();
-                        MethodOutput {
+                        Some(MethodOutput {
                             futures: vec![mask.clone(); horizons_us.len()],
                             current: mask,
                             runtime,
-                        }
+                        })
                     }
-                    MethodKind::NoForecast => MethodOutput {
-                        futures: vec![current_source.clone(); horizons_us.len()],
-                        current: current_source.clone(),
-                        runtime: source_runtime,
-                    },
-                    MethodKind::Linear => {
+                    MethodKind::NoForecast => {
+                        current_source
+                            .as_ref()
+                            .map(|(current, runtime)| MethodOutput {
+                                futures: vec![current.clone(); horizons_us.len()],
+                                current: current.clone(),
+                                runtime: *runtime,
+                            })
+                    }
+                    MethodKind::Linear => current_source.as_ref().map(|(current, runtime)| {
                         let started = Instant::now();
                         let (previous_us, previous) = previous_current
                             .as_ref()
-                            .map_or((reference_us, &current_source), |(t, m)| (*t, m));
+                            .map_or((reference_us, current), |(t, m)| (*t, m));
                         let futures = extrapolate(
                             previous,
-                            &current_source,
+                            current,
                             size,
                             reference_us - previous_us,
                             &horizons_us,
@@ -342,44 +344,73 @@ impl Evaluation {
                         );
                         MethodOutput {
                             futures,
-                            current: current_source.clone(),
-                            runtime: source_runtime + started.elapsed(),
+                            current: current.clone(),
+                            runtime: *runtime + started.elapsed(),
                         }
-                    }
+                    }),
                     MethodKind::Model(index) => {
                         let output = &model_outputs[index];
-                        MethodOutput {
+                        Some(MethodOutput {
                             current: output.current.clone(),
                             futures: output.futures.clone(),
                             runtime: output.runtime,
-                        }
+                        })
                     }
-                    MethodKind::Oracle => MethodOutput {
-                        current: now.iter().map(|&id| id != 0).collect(),
+                    MethodKind::Oracle => now.map(|now| MethodOutput {
+                        current: to_mask(now),
                         futures: truth
                             .at_horizon
                             .iter()
                             .map(|t| t.map_or_else(|| vec![false; size.pixels()], to_mask))
                             .collect(),
                         runtime: Duration::ZERO,
-                    },
+                    }),
                 };
                 outputs.push(output);
             }
-            previous_current = Some((reference_us, current_source));
+            previous_current = current_source.map(|(current, _)| (reference_us, current));
 
-            let gated = gated_events(sequence, reference_us, gate_span_us);
-            let gating_horizons: Vec<usize> = (0..horizons_us.len())
-                .filter(|&k| horizons_us[k] <= gate_span_us)
-                .collect();
-            let can_gate = gating_horizons
+            let gated = gated_events(recording, reference_us, gate_span_us);
+            let truth_at_every_gating_horizon = gating_horizons
                 .iter()
                 .all(|&k| truth.at_horizon[k].is_some());
-            for (index, output) in outputs.iter().enumerate() {
+            // With per-event labels every method is gated over the same spans (those the oracle
+            // can gate), so their event scores compare; camera-rate masks rarely cover every
+            // gating horizon, so there only the oracle waits for them.
+            let can_gate = |kind: MethodKind| match kind {
+                MethodKind::Oracle => truth_at_every_gating_horizon,
+                _ => {
+                    ground_truth != GroundTruth::MasksAndEventLabels
+                        || truth_at_every_gating_horizon
+                }
+            };
+            for (index, (output, method)) in outputs.iter().zip(&self.methods).enumerate() {
+                let Some(output) = output else {
+                    continue;
+                };
                 let accumulator = &mut accumulators[index];
                 accumulator
                     .runtime_ms
                     .add(output.runtime.as_secs_f64() * 1e3);
+                if can_gate(method.kind) {
+                    let gate = score_events(
+                        &gated,
+                        reference_us,
+                        &gating_horizons,
+                        &horizons_us,
+                        &output.futures,
+                        size,
+                    )
+                    .map_err(|error| error.at(name, reference_us))?;
+                    accumulator.kept.merge(KeptCounts {
+                        span_us: gate_span_us,
+                        ..gate.kept
+                    });
+                    accumulator.events.merge(gate.confusion);
+                }
+                let Some(now) = truth.now else {
+                    continue;
+                };
                 let point = PixelConfusion::count_where(&output.current, now, &truth.presence)
                     .map_err(scoring_error)?;
                 accumulator.point_iou.add(point.imo_iou());
@@ -403,21 +434,11 @@ impl Evaluation {
                         }
                     }
                 }
-                if can_gate && !gated.0.is_empty() {
-                    let counts = score_events(
-                        &gated,
-                        reference_us,
-                        &gating_horizons,
-                        &horizons_us,
-                        &output.futures,
-                        size,
-                    )
-                    .map_err(|error| error.at(&view.name, reference_us))?;
-                    accumulator.events.merge(counts);
-                }
             }
-            self.sweep_oms(&truth, size, headline, &mut sweep)
-                .map_err(scoring_error)?;
+            if truth.now.is_some() {
+                self.sweep_oms(&truth, size, headline, &mut sweep)
+                    .map_err(scoring_error)?;
+            }
             on_reference();
         }
 
@@ -446,16 +467,16 @@ impl Evaluation {
                 .collect(),
         );
         self.sequences.push(SequenceResult {
-            name: view.name.clone(),
-            path: path.to_path_buf(),
-            preset: view.preset.clone(),
+            name: name.to_owned(),
+            path: recording.path.clone(),
+            preset: recording.group.clone(),
             sensor: size,
             references: references.len(),
+            ground_truth,
             methods,
         });
         Ok(self.sequences.last().expect("just pushed"))
     }
-
     /// Scores every OMS setting of the sweep at the headline horizon and the current instant.
     fn sweep_oms(
         &self,
@@ -465,6 +486,9 @@ impl Evaluation {
         sweep: &mut [(HorizonAccumulator, Mean)],
     ) -> Result<(), SegmentationError> {
         let threshold = self.config.iou_threshold;
+        let Some(now) = truth.now else {
+            return Ok(());
+        };
         let mut responses: BTreeMap<(u32, u32), Vec<f32>> = BTreeMap::new();
         for (setting, (horizon, point)) in self.sweep_settings.iter().zip(sweep.iter_mut()) {
             let response = responses
@@ -478,7 +502,7 @@ impl Evaluation {
                     )
                 });
             let mask = threshold_response(response, setting.threshold);
-            let current = PixelConfusion::count_where(&mask, truth.now, &truth.presence)?;
+            let current = PixelConfusion::count_where(&mask, now, &truth.presence)?;
             point.add(current.imo_iou());
             if let Some(target) = truth.at_horizon[headline] {
                 let pixels = PixelConfusion::count(&mask, target)?;
@@ -598,17 +622,20 @@ impl Evaluation {
     }
 }
 
-/// Events of [t, t + span) with their labels.
+/// Events of [t, t + span) with their labels, when the recording has them.
 fn gated_events(
-    sequence: &LabelledSequence,
+    recording: &Recording,
     reference_us: i64,
     span_us: i64,
-) -> (&[evgate_core::Event], &[u16]) {
-    let first = sequence.events.partition_point(|e| e.t < reference_us);
-    let last = sequence
-        .events
-        .partition_point(|e| e.t < reference_us + span_us);
-    (&sequence.events[first..last], &sequence.labels[first..last])
+) -> (&[evgate_core::Event], Option<&[u16]>) {
+    let events = &recording.events;
+    let first = events.partition_point(|e| e.t < reference_us);
+    let last = events.partition_point(|e| e.t < reference_us + span_us);
+    let labels = recording
+        .event_labels
+        .as_deref()
+        .map(|labels| &labels[first..last]);
+    (&events[first..last], labels)
 }
 
 /// A gating failure before the sequence and time are known.
@@ -634,16 +661,29 @@ impl GatingError {
     }
 }
 
+/// What gating one span gave: kept counts always, the confusion against labels when known.
+struct GateScores {
+    kept: KeptCounts,
+    confusion: EventConfusion,
+}
+
 /// Gates the events with the forecast masks of the gating horizons (the gate kernel's
-/// horizon intervals) and counts flagged-as-IMO against the true labels.
+/// horizon intervals), counts what is kept and, with labels, flagged-as-IMO against the truth.
 fn score_events(
-    (events, labels): &(&[evgate_core::Event], &[u16]),
+    (events, labels): &(&[evgate_core::Event], Option<&[u16]>),
     reference_us: i64,
     gating_horizons: &[usize],
     horizons_us: &[i64],
     futures: &[Vec<bool>],
     size: SensorSize,
-) -> Result<EventConfusion, GatingError> {
+) -> Result<GateScores, GatingError> {
+    let mut scores = GateScores {
+        kept: KeptCounts::default(),
+        confusion: EventConfusion::default(),
+    };
+    if events.is_empty() {
+        return Ok(scores);
+    }
     let mut words = Vec::new();
     for &k in gating_horizons {
         let mut mask = BitMask::new(size).map_err(GatingError::Mask)?;
@@ -664,14 +704,34 @@ fn score_events(
     let (mut keep, mut judged) = (vec![0u64; word_count], vec![0u64; word_count]);
     view.keep_bitmap(events, GateMode::KeepMovingObjects, &mut keep, &mut judged)
         .map_err(GatingError::Gate)?;
-    let mut counts = EventConfusion::default();
-    for (i, &label) in labels.iter().enumerate() {
-        let bit = |words: &[u64]| words[i / 64] >> (i % 64) & 1 == 1;
-        if bit(&judged) {
-            counts.add(bit(&keep), label != 0);
+    let bit = |words: &[u64], i: usize| words[i / 64] >> (i % 64) & 1 == 1;
+    for i in (0..events.len()).filter(|&i| bit(&judged, i)) {
+        let kept = bit(&keep, i);
+        scores.kept.judged += 1;
+        scores.kept.kept += u64::from(kept);
+        if let Some(labels) = labels {
+            scores.confusion.add(kept, labels[i] != 0);
         }
     }
-    Ok(counts)
+    Ok(scores)
+}
+
+/// The voxel grid as the model's input: zero-padded at the right and bottom when the model was
+/// exported for a larger input than the sensor's padded size (the contract's own padding).
+fn fit_to_model(voxel: &VoxelGrid, input: SensorSize) -> std::borrow::Cow<'_, [f32]> {
+    let padded = voxel.padded();
+    if padded == input {
+        return std::borrow::Cow::Borrowed(voxel.as_slice());
+    }
+    let (from_width, to_width) = (usize::from(padded.width), usize::from(input.width));
+    let mut fitted = vec![0.0; voxel.bins() * input.pixels()];
+    for (bin, plane) in voxel.as_slice().chunks(padded.pixels()).enumerate() {
+        let target = &mut fitted[bin * input.pixels()..(bin + 1) * input.pixels()];
+        for (row, values) in plane.chunks(from_width).enumerate() {
+            target[row * to_width..row * to_width + from_width].copy_from_slice(values);
+        }
+    }
+    std::borrow::Cow::Owned(fitted)
 }
 
 fn to_mask(ids: &[u8]) -> Vec<bool> {
@@ -690,18 +750,20 @@ fn crop_logits(logits: &[f32], row_stride: usize, size: SensorSize) -> Vec<bool>
 
 #[cfg(test)]
 mod tests {
+    use std::path::Path;
+
     use super::*;
     use crate::fixture;
+    use crate::recording::MaskFrames;
 
     fn run(config: EvalConfig) -> Report {
-        let sequence = fixture::sequence();
+        let recording =
+            Recording::from_labelled(fixture::sequence(), Path::new("suite/test/slide-0001.npz"))
+                .unwrap();
         let mut evaluation = Evaluation::new(config, Vec::new()).unwrap();
-        let path = Path::new("suite/test/slide-0001.npz");
-        let expected = evaluation.reference_count(&sequence, path);
+        let expected = evaluation.reference_count(&recording);
         let mut seen = 0;
-        evaluation
-            .evaluate_sequence(&sequence, path, || seen += 1)
-            .unwrap();
+        evaluation.evaluate(&recording, || seen += 1).unwrap();
         assert_eq!(seen, expected);
         evaluation.finish(Some("test".to_owned())).unwrap()
     }
@@ -734,8 +796,8 @@ mod tests {
             evgate_core::Event::new(t + 9_500, 9, 9, true), // off the sensor: unjudged
         ];
         let labels = [3, 0, 3, 0, 3, 3];
-        let counts = score_events(
-            &(&events[..], &labels[..]),
+        let scores = score_events(
+            &(&events[..], Some(&labels[..])),
             t,
             &[0, 1],
             &[0, 10_000],
@@ -745,7 +807,15 @@ mod tests {
         .ok()
         .unwrap();
         assert_eq!(
-            counts,
+            scores.kept,
+            KeptCounts {
+                judged: 5,
+                kept: 2,
+                span_us: 0
+            }
+        );
+        assert_eq!(
+            scores.confusion,
             EventConfusion {
                 true_positive: 2,
                 false_positive: 0,
@@ -814,16 +884,111 @@ mod tests {
         assert_eq!(report.sequences[0].references, 4);
     }
 
-    #[test]
-    fn labels_must_match_events() {
-        let mut sequence = fixture::sequence();
-        sequence.labels.pop();
+    fn run_recording(recording: &Recording) -> Report {
         let mut evaluation = Evaluation::new(small_config(), Vec::new()).unwrap();
-        let error = evaluation
-            .evaluate_sequence(&sequence, Path::new("x.npz"), || {})
-            .err()
-            .unwrap();
-        assert!(error.to_string().contains("events_label"), "{error}");
+        evaluation.evaluate(recording, || {}).unwrap();
+        evaluation.finish(None).unwrap()
+    }
+
+    #[test]
+    fn events_only_recordings_report_kept_ratio_and_rates_without_truth_metrics() {
+        let sequence = fixture::sequence();
+        let recording = Recording::events_only(
+            Path::new("dsec/zurich_city_00_a/events.h5"),
+            "dsec".to_owned(),
+            sequence.sensor_size,
+            sequence.events,
+            50_000,
+        )
+        .unwrap();
+        let report = run_recording(&recording);
+        assert_eq!(report.sequences[0].ground_truth, GroundTruth::EventsOnly);
+        let oms = &report.overall["oms"];
+        // The fixture emits 15 events every 500 µs: 30 000 events/s, all on the sensor.
+        let rate = oms.kept.event_rate_hz.unwrap();
+        assert!((rate - 30_000.0).abs() < 1.0, "{rate}");
+        let kept = oms.kept.kept_ratio.unwrap();
+        assert!(kept > 0.0 && kept < 1.0, "{kept}");
+        assert!(oms.runtime_ms_median.is_some());
+        assert!(oms
+            .horizons
+            .iter()
+            .all(|h| h.mean_iou.is_none() && h.frames == 0));
+        assert_eq!(oms.point_iou, None);
+        assert_eq!(oms.events.f1, None);
+        // Without a model or masks there is no current mask to hold, extrapolate or copy.
+        for method in ["no-forecast", "linear", "oracle"] {
+            assert_eq!(report.overall[method].runtime_ms_mean, None, "{method}");
+            assert_eq!(report.overall[method].kept.kept_ratio, None, "{method}");
+        }
+        assert!(report.oms_sweep.best.is_none());
+    }
+
+    #[test]
+    fn mask_recordings_score_masks_at_the_nearest_frame_but_not_events() {
+        let sequence = fixture::sequence();
+        let pixels = sequence.sensor_size.pixels();
+        // Camera frames every 25 ms (40 Hz), as EVIMO's; the fixture's grid is 10 ms.
+        let frame_indices: Vec<usize> = (0..sequence.gt_ts.len())
+            .filter(|&f| sequence.gt_ts[f] % 50_000 == 0 || sequence.gt_ts[f] % 50_000 == 30_000)
+            .collect();
+        let frames = MaskFrames {
+            times_us: frame_indices.iter().map(|&f| sequence.gt_ts[f]).collect(),
+            masks: frame_indices
+                .iter()
+                .flat_map(|&f| sequence.masks[f * pixels..(f + 1) * pixels].to_vec())
+                .collect(),
+            tolerance_us: 5_000,
+        };
+        let recording = Recording::with_mask_frames(
+            Path::new("evimo/box/seq_00.npz"),
+            "box".to_owned(),
+            sequence.sensor_size,
+            sequence.events,
+            frames,
+        )
+        .unwrap();
+        let report = run_recording(&recording);
+        assert_eq!(report.sequences[0].ground_truth, GroundTruth::Masks);
+        assert_eq!(report.presets[0].preset, "box");
+        let oracle = &report.overall["oracle"];
+        // Frames (and reference times) at 0 and 30 ms past each 50 ms: t + 10 ms is 10 or 20 ms
+        // from every frame, beyond the 5 ms tolerance; t + 30 ms always finds one.
+        assert!(oracle.at(30).unwrap().frames > 0);
+        assert_eq!(oracle.at(10).unwrap().frames, 0);
+        assert_eq!(oracle.at(30).unwrap().mean_iou, Some(1.0));
+        assert_eq!(oracle.events.f1, None);
+        // Gating needs masks at 0, 10, … 50 ms: camera frames never cover all of them, so only
+        // the methods that forecast every horizon are gated.
+        assert_eq!(oracle.kept.kept_ratio, None);
+        assert!(report.overall["oms"].kept.kept_ratio.is_some());
+        assert!(report.overall["linear"].kept.kept_ratio.is_some());
+        // No model: no-forecast holds the ground truth at t and is exact at horizon 0.
+        assert_eq!(
+            report.overall["no-forecast"].at(0).unwrap().mean_iou,
+            Some(1.0)
+        );
+    }
+
+    #[test]
+    fn a_larger_model_input_gets_the_grid_zero_padded() {
+        let mut voxel = VoxelGrid::new(SensorSize::new(16, 16), 2).unwrap();
+        voxel.accumulate(
+            &[evgate_core::Event::new(10, 15, 15, true)],
+            TimeSpan::new(0, 20).unwrap(),
+        );
+        let fitted = fit_to_model(&voxel, SensorSize::new(32, 32));
+        assert_eq!(fitted.len(), 2 * 32 * 32);
+        let sum_of = |values: &[f32]| values.iter().map(|v| v.abs()).sum::<f32>();
+        assert!(sum_of(voxel.as_slice()) > 0.0);
+        assert_eq!(sum_of(&fitted), sum_of(voxel.as_slice()));
+        for bin in 0..2 {
+            for row in 0..16 {
+                let source = &voxel.as_slice()[bin * 256 + row * 16..bin * 256 + row * 16 + 16];
+                let target = &fitted[bin * 1024 + row * 32..bin * 1024 + row * 32 + 16];
+                assert_eq!(source, target);
+            }
+        }
     }
 
     #[test]

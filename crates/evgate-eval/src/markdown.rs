@@ -3,34 +3,73 @@
 use std::fmt::Write;
 
 use crate::method::MethodKind;
+use crate::model_tables::model_tables;
+use crate::recording::GroundTruth;
 use crate::report::Report;
 use crate::summary::MethodSummary;
 
-fn percent(value: Option<f64>) -> String {
+pub(crate) fn percent(value: Option<f64>) -> String {
     value.map_or_else(|| "–".to_owned(), |v| format!("{:.1}", v * 100.0))
 }
 
-fn number(value: Option<f64>, decimals: usize) -> String {
+pub(crate) fn number(value: Option<f64>, decimals: usize) -> String {
     value.map_or_else(|| "–".to_owned(), |v| format!("{v:.decimals$}"))
 }
 
-fn row(cells: &[String]) -> String {
+/// What a cell of a ground-truth metric says where the recordings have no masks.
+pub const NO_MASKS: &str = "n/a — no masks in this recording";
+
+pub(crate) fn rate(value: Option<f64>) -> String {
+    value.map_or_else(|| "–".to_owned(), |v| format!("{:.3}", v / 1e6))
+}
+
+pub(crate) fn row(cells: &[String]) -> String {
     format!("| {} |\n", cells.join(" | "))
 }
 
-fn header(cells: &[String]) -> String {
+pub(crate) fn header(cells: &[String]) -> String {
     let rule: Vec<String> = cells.iter().map(|_| "---".to_owned()).collect();
     row(cells) + &row(&rule)
 }
 
 /// Rows of (label, per-preset summaries, overall summary).
-fn preset_columns(report: &Report) -> Vec<String> {
+pub(crate) fn preset_columns(report: &Report) -> Vec<String> {
     let mut columns: Vec<String> = report.presets.iter().map(|p| p.preset.clone()).collect();
     columns.push("all".to_owned());
     columns
 }
 
-fn method_summaries<'a>(report: &'a Report, method: &str) -> Vec<Option<&'a MethodSummary>> {
+/// Per preset column (and "all"): whether any of its recordings has masks.
+fn columns_with_masks(report: &Report) -> Vec<bool> {
+    let has_masks = |preset: Option<&str>| {
+        report
+            .sequences
+            .iter()
+            .filter(|s| preset.is_none_or(|p| s.preset == p))
+            .any(|s| s.ground_truth.has_masks())
+    };
+    let mut columns: Vec<bool> = report
+        .presets
+        .iter()
+        .map(|p| has_masks(Some(&p.preset)))
+        .collect();
+    columns.push(has_masks(None));
+    columns
+}
+
+/// A ground-truth score, or [`NO_MASKS`] where there was nothing to score against.
+pub(crate) fn truth_cell(has_masks: bool, text: String) -> String {
+    if has_masks {
+        text
+    } else {
+        NO_MASKS.to_owned()
+    }
+}
+
+pub(crate) fn method_summaries<'a>(
+    report: &'a Report,
+    method: &str,
+) -> Vec<Option<&'a MethodSummary>> {
     let mut summaries: Vec<Option<&MethodSummary>> = report
         .presets
         .iter()
@@ -94,14 +133,18 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
     let mut cells = vec!["preset".to_owned()];
     cells.extend(forecasters.iter().map(|m| format!("{m} mIoU / R@0.5")));
     out += &header(&cells);
+    let with_masks = columns_with_masks(report);
     for (index, column) in preset_columns(report).iter().enumerate() {
         let mut cells = vec![column.clone()];
         for method in &forecasters {
             let at = method_summaries(report, method)[index].and_then(|s| s.at(headline));
-            cells.push(format!(
-                "{} / {}",
-                percent(at.and_then(|h| h.mean_iou)),
-                percent(at.and_then(|h| h.instance_recall))
+            cells.push(truth_cell(
+                with_masks[index],
+                format!(
+                    "{} / {}",
+                    percent(at.and_then(|h| h.mean_iou)),
+                    percent(at.and_then(|h| h.instance_recall))
+                ),
             ));
         }
         out += &row(&cells);
@@ -112,9 +155,15 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
     let _ = writeln!(
         out,
         "## All metrics, all sequences (mIoU, IMO IoU, SR@0.5, R@0.5 at t + {headline} ms; pIoU at t; \
-         per-event scores of the gate over [t, t + {} ms))\n",
+         per-event scores of the gate over [t, t + {} ms); kept share and event rates in \
+         millions of events per second, which need no ground truth)\n",
         report.config.gate_span_ms
     );
+    let any_masks = *with_masks.last().expect("the all column");
+    let any_labels = report
+        .sequences
+        .iter()
+        .any(|s| s.ground_truth == GroundTruth::MasksAndEventLabels);
     out += &header(
         &[
             "method",
@@ -126,6 +175,9 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
             "event precision",
             "event recall",
             "event F1",
+            "kept %",
+            "Mev/s in",
+            "Mev/s kept",
         ]
         .map(str::to_owned),
     );
@@ -134,16 +186,27 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
             continue;
         };
         let at = summary.at(headline);
+        let masks = |value: Option<f64>| truth_cell(any_masks, percent(value));
+        let labels = |value: Option<f64>| {
+            if any_labels {
+                percent(value)
+            } else {
+                "n/a — no per-event labels in this recording".to_owned()
+            }
+        };
         out += &row(&[
             method.name.clone(),
-            percent(at.and_then(|h| h.mean_iou)),
-            percent(at.and_then(|h| h.imo_iou)),
-            percent(at.and_then(|h| h.success_rate)),
-            percent(at.and_then(|h| h.instance_recall)),
-            percent(summary.point_iou),
-            percent(summary.events.precision),
-            percent(summary.events.recall),
-            percent(summary.events.f1),
+            masks(at.and_then(|h| h.mean_iou)),
+            masks(at.and_then(|h| h.imo_iou)),
+            masks(at.and_then(|h| h.success_rate)),
+            masks(at.and_then(|h| h.instance_recall)),
+            masks(summary.point_iou),
+            labels(summary.events.precision),
+            labels(summary.events.recall),
+            labels(summary.events.f1),
+            percent(summary.kept.kept_ratio),
+            rate(summary.kept.event_rate_hz),
+            rate(summary.kept.kept_event_rate_hz),
         ]);
     }
     out.push('\n');
@@ -203,7 +266,8 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         cells.extend(
             method_summaries(report, &method.name)
                 .iter()
-                .map(|s| percent(s.and_then(|s| s.point_iou))),
+                .zip(&with_masks)
+                .map(|(s, &masks)| truth_cell(masks, percent(s.and_then(|s| s.point_iou)))),
         );
         out += &row(&cells);
     }
@@ -222,6 +286,7 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
             "method",
             "runtime mean (ms)",
             "runtime std (ms)",
+            "runtime median (ms)",
             "prediction age (ms)",
             "GFLOPs",
         ]
@@ -239,91 +304,14 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
             method.name.clone(),
             number(summary.runtime_ms_mean, 2),
             number(summary.runtime_ms_std, 2),
+            number(summary.runtime_ms_median, 2),
             number(summary.prediction_age_ms, 1),
             number(method.gflops, 3),
         ]);
     }
     out.push('\n');
 
-    // Table VI
-    let primary_size = report
-        .models()
-        .next()
-        .and_then(|m| m.model.as_ref())
-        .map(|m| m.size.clone());
-    let _ = writeln!(
-        out,
-        "## Ablation: mIoU (%) at t + {headline} ms (Table VI)\n"
-    );
-    let mut cells = vec!["FW".to_owned(), "ATC".to_owned()];
-    cells.extend(preset_columns(report));
-    out += &header(&cells);
-    let mut ablation_rows: Vec<(String, String, &str)> = vec![
-        ("×".to_owned(), "×".to_owned(), "no-forecast"),
-        ("linear".to_owned(), "×".to_owned(), "linear"),
-    ];
-    for method in report.models() {
-        let info = method.model.as_ref().expect("models() only yields models");
-        if Some(&info.size) != primary_size.as_ref() {
-            continue;
-        }
-        let atc = if info.atc == "none" {
-            "×".to_owned()
-        } else {
-            format!("✓ ({})", info.atc)
-        };
-        ablation_rows.push(("✓".to_owned(), atc, method.name.as_str()));
-    }
-    for (flow_warping, atc, method) in ablation_rows {
-        let mut cells = vec![flow_warping, atc];
-        cells.extend(
-            method_summaries(report, method)
-                .iter()
-                .map(|s| percent(s.and_then(|s| s.at(headline)).and_then(|h| h.mean_iou))),
-        );
-        out += &row(&cells);
-    }
-    out.push('\n');
-
-    // Table VII
-    let primary_atc = report
-        .models()
-        .next()
-        .and_then(|m| m.model.as_ref())
-        .map(|m| m.atc.clone());
-    let _ = writeln!(
-        out,
-        "## Model sizes: mIoU (%) at t + {headline} ms (Table VII)\n"
-    );
-    let mut cells = vec!["model".to_owned(), "size".to_owned()];
-    cells.extend(preset_columns(report));
-    out += &header(&cells);
-    let mut sized: Vec<_> = report
-        .models()
-        .filter(|m| m.model.as_ref().map(|i| &i.atc) == primary_atc.as_ref())
-        .collect();
-    let order = ["XS", "S", "M", "L"];
-    sized.sort_by_key(|m| {
-        order
-            .iter()
-            .position(|s| Some(*s) == m.model.as_ref().map(|i| i.size.as_str()))
-    });
-    for method in sized {
-        let mut cells = vec![
-            method.name.clone(),
-            method
-                .model
-                .as_ref()
-                .map_or_else(String::new, |i| i.size.clone()),
-        ];
-        cells.extend(
-            method_summaries(report, &method.name)
-                .iter()
-                .map(|s| percent(s.and_then(|s| s.at(headline)).and_then(|h| h.mean_iou))),
-        );
-        out += &row(&cells);
-    }
-    out.push('\n');
+    out += &model_tables(report, &with_masks);
 
     // Horizon curves as numbers.
     let _ = writeln!(out, "## mIoU (%) against horizon, all sequences\n");
@@ -392,12 +380,55 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         ];
         for method in &forecasters {
             let at = sequence.methods.get(*method).and_then(|s| s.at(headline));
-            cells.push(format!(
-                "{} / {}",
-                percent(at.and_then(|h| h.mean_iou)),
-                percent(at.and_then(|h| h.instance_recall))
+            cells.push(truth_cell(
+                sequence.ground_truth.has_masks(),
+                format!(
+                    "{} / {}",
+                    percent(at.and_then(|h| h.mean_iou)),
+                    percent(at.and_then(|h| h.instance_recall))
+                ),
             ));
         }
+        out += &row(&cells);
+    }
+    out.push('\n');
+    out += &gating_table(report);
+    out
+}
+
+/// Per recording: what ground truth it had, the input event rate and every method's kept share
+/// (the figures a recording without masks still gives).
+fn gating_table(report: &Report) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "## Gating per recording: ground truth, input rate (Mev/s) and kept share (%)\n"
+    );
+    let methods: Vec<&str> = report.methods.iter().map(|m| m.name.as_str()).collect();
+    let mut cells = vec![
+        "sequence".to_owned(),
+        "ground truth".to_owned(),
+        "Mev/s in".to_owned(),
+    ];
+    cells.extend(methods.iter().map(|m| format!("{m} kept")));
+    out += &header(&cells);
+    for sequence in &report.sequences {
+        let input_rate = sequence.methods.values().find_map(|s| s.kept.event_rate_hz);
+        let ground_truth = match sequence.ground_truth {
+            GroundTruth::MasksAndEventLabels => "masks, event labels",
+            GroundTruth::Masks => "masks",
+            GroundTruth::EventsOnly => "none",
+        };
+        let mut cells = vec![
+            sequence.name.clone(),
+            ground_truth.to_owned(),
+            rate(input_rate),
+        ];
+        cells.extend(
+            methods
+                .iter()
+                .map(|m| percent(sequence.methods.get(*m).and_then(|s| s.kept.kept_ratio))),
+        );
         out += &row(&cells);
     }
     out

@@ -9,6 +9,8 @@ use crate::oms::OmsParameters;
 
 /// The paper counts operations for every method at one input size, 640×480.
 pub const GFLOPS_REFERENCE_SENSOR: SensorSize = SensorSize::new(640, 480);
+/// EVIMO's camera, the other size the model tables count at.
+pub const DAVIS346_SENSOR: SensorSize = SensorSize::new(346, 260);
 
 /// What produces a method's masks.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -34,6 +36,21 @@ pub struct ModelInfo {
     pub atc: String,
     pub base_channels: u32,
     pub train_steps: u64,
+    /// Whether the weights were trained (`evgate.train-manifest-sha256` is not `untrained`).
+    #[serde(default = "trained_by_default")]
+    pub trained: bool,
+    pub path: Option<std::path::PathBuf>,
+    /// From the FLOP table, by size class.
+    #[serde(default)]
+    pub parameters: Option<u64>,
+    /// The FLOP table the parameters and GFLOPs come from.
+    #[serde(default)]
+    pub size_figures_from: Option<std::path::PathBuf>,
+}
+
+/// Reports written before the field existed only held trained models.
+fn trained_by_default() -> bool {
+    true
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -47,6 +64,9 @@ pub struct MethodInfo {
     pub forecast_horizon_ms: f64,
     /// Analytical floating-point operations per frame at 640×480, where known.
     pub gflops: Option<f64>,
+    /// The same at 346×260 (EVIMO's DAVIS346), where known.
+    #[serde(default)]
+    pub gflops_346x260: Option<f64>,
     pub model: Option<ModelInfo>,
 }
 
@@ -58,6 +78,7 @@ impl MethodInfo {
             kind,
             forecast_horizon_ms: horizon_ms,
             gflops: None,
+            gflops_346x260: None,
             model: None,
         }
     }
@@ -68,8 +89,10 @@ impl MethodInfo {
              same mask for every horizon",
             parameters.centre_radius, parameters.surround_radius, parameters.threshold
         );
+        let gflops_at = |sensor| parameters.flops_per_frame(sensor) as f64 / 1e9;
         Self {
-            gflops: Some(parameters.flops_per_frame(GFLOPS_REFERENCE_SENSOR) as f64 / 1e9),
+            gflops: Some(gflops_at(GFLOPS_REFERENCE_SENSOR)),
+            gflops_346x260: Some(gflops_at(DAVIS346_SENSOR)),
             ..Self::baseline("oms", description, MethodKind::Oms(parameters), 0.0)
         }
     }
@@ -96,7 +119,13 @@ impl MethodInfo {
         Self::baseline("oracle", description, MethodKind::Oracle, horizon)
     }
 
-    pub fn model(index: usize, label: &str, metadata: &ModelMetadata, config: &EvalConfig) -> Self {
+    pub fn model(
+        index: usize,
+        label: &str,
+        path: &std::path::Path,
+        metadata: &ModelMetadata,
+        config: &EvalConfig,
+    ) -> Self {
         let atc = serde_json::to_value(metadata.atc)
             .ok()
             .and_then(|v| v.as_str().map(str::to_owned))
@@ -104,17 +133,29 @@ impl MethodInfo {
         Self {
             name: format!("model:{label}"),
             description: format!(
-                "network {label} (size {}, ATC {atc}), future masks by flow warping",
-                metadata.model_size.label()
+                "network {label} (size {}, ATC {atc}, {} training steps{}), future masks by flow \
+                 warping",
+                metadata.model_size.label(),
+                metadata.train_steps,
+                if metadata.train_manifest_sha256.is_none() {
+                    ", untrained weights"
+                } else {
+                    ""
+                }
             ),
             kind: MethodKind::Model(index),
             forecast_horizon_ms: f64::from(config.headline_horizon_ms),
             gflops: None,
+            gflops_346x260: None,
             model: Some(ModelInfo {
                 size: metadata.model_size.label().to_owned(),
                 atc,
                 base_channels: metadata.base_channels,
                 train_steps: metadata.train_steps,
+                trained: metadata.train_manifest_sha256.is_some(),
+                path: Some(path.to_path_buf()),
+                parameters: None,
+                size_figures_from: None,
             }),
         }
     }

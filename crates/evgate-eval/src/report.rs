@@ -11,6 +11,7 @@ use crate::binned::BinValue;
 use crate::config::EvalConfig;
 use crate::method::MethodInfo;
 use crate::oms::OmsParameters;
+use crate::recording::GroundTruth;
 use crate::summary::{HorizonSummary, Mean, MethodSummary};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -21,6 +22,9 @@ pub struct SequenceResult {
     pub preset: String,
     pub sensor: SensorSize,
     pub references: usize,
+    /// What the recording could be scored against; metrics needing more are `null`.
+    #[serde(default = "GroundTruth::simulator")]
+    pub ground_truth: GroundTruth,
     pub methods: BTreeMap<String, MethodSummary>,
 }
 

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::event_scores::{EventConfusion, EventScores};
 use crate::instances::InstanceCounts;
+use crate::kept::{KeptCounts, KeptRates};
 use crate::segmentation::{frame_success, PixelConfusion};
 
 /// Running mean of the defined values.
@@ -31,12 +32,13 @@ impl Mean {
     }
 }
 
-/// Running mean and standard deviation.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// Running mean and standard deviation, and the median of the values seen.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Spread {
     sum: f64,
     sum_of_squares: f64,
     count: u64,
+    values: Vec<f64>,
 }
 
 impl Spread {
@@ -44,6 +46,19 @@ impl Spread {
         self.sum += value;
         self.sum_of_squares += value * value;
         self.count += 1;
+        self.values.push(value);
+    }
+
+    /// The middle value (the mean of the two middle ones for an even count).
+    pub fn median(&self) -> Option<f64> {
+        let mut sorted = self.values.clone();
+        sorted.sort_by(f64::total_cmp);
+        let middle = sorted.len() / 2;
+        match sorted.len() {
+            0 => None,
+            n if n % 2 == 1 => Some(sorted[middle]),
+            _ => Some((sorted[middle - 1] + sorted[middle]) / 2.0),
+        }
     }
 
     pub fn mean(&self) -> Option<f64> {
@@ -98,6 +113,7 @@ pub struct MethodAccumulator {
     pub horizons: Vec<HorizonAccumulator>,
     pub point_iou: Mean,
     pub events: EventConfusion,
+    pub kept: KeptCounts,
     pub runtime_ms: Spread,
 }
 
@@ -107,6 +123,7 @@ impl MethodAccumulator {
             horizons: vec![HorizonAccumulator::default(); horizon_count],
             point_iou: Mean::default(),
             events: EventConfusion::default(),
+            kept: KeptCounts::default(),
             runtime_ms: Spread::default(),
         }
     }
@@ -124,8 +141,10 @@ impl MethodAccumulator {
                 .collect(),
             point_iou: self.point_iou.value(),
             events: self.events.into(),
+            kept: self.kept.rates(),
             runtime_ms_mean,
             runtime_ms_std: self.runtime_ms.std(),
+            runtime_ms_median: self.runtime_ms.median(),
             prediction_age_ms: runtime_ms_mean.map(|r| forecast_horizon_ms - r),
         }
     }
@@ -153,10 +172,16 @@ pub struct MethodSummary {
     pub horizons: Vec<HorizonSummary>,
     /// IMO IoU at the reference time over pixels that hold an event of the window.
     pub point_iou: Option<f64>,
-    /// The suppression operator scored per event.
+    /// The suppression operator scored per event (needs per-event labels).
     pub events: EventScores,
+    /// What the gate keeps (needs no ground truth).
+    #[serde(default)]
+    pub kept: KeptRates,
     pub runtime_ms_mean: Option<f64>,
     pub runtime_ms_std: Option<f64>,
+    /// Per sequence the median; averaged over sequences like every other score.
+    #[serde(default)]
+    pub runtime_ms_median: Option<f64>,
     pub prediction_age_ms: Option<f64>,
 }
 
@@ -200,8 +225,15 @@ impl MethodSummary {
                 f1: field(|s| s.events.f1),
                 events: summaries.iter().map(|s| s.events.events).sum(),
             },
+            kept: KeptRates {
+                kept_ratio: field(|s| s.kept.kept_ratio),
+                event_rate_hz: field(|s| s.kept.event_rate_hz),
+                kept_event_rate_hz: field(|s| s.kept.kept_event_rate_hz),
+                judged_events: summaries.iter().map(|s| s.kept.judged_events).sum(),
+            },
             runtime_ms_mean: field(|s| s.runtime_ms_mean),
             runtime_ms_std: field(|s| s.runtime_ms_std),
+            runtime_ms_median: field(|s| s.runtime_ms_median),
             prediction_age_ms: field(|s| s.prediction_age_ms),
         })
     }
@@ -235,6 +267,10 @@ mod tests {
         }
         assert_eq!(spread.mean(), Some(5.0));
         assert_eq!(spread.std(), Some(2.0));
+        assert_eq!(spread.median(), Some(4.5));
+        spread.add(1.0);
+        assert_eq!(spread.median(), Some(4.0));
+        assert_eq!(Spread::default().median(), None);
     }
 
     #[test]

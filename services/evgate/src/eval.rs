@@ -2,34 +2,30 @@
 //! oracle) on a split of the simulator's suite or on labelled sequences, and writes the report
 //! (JSON, Markdown tables, PNG plots).
 
+#[path = "eval_inputs.rs"]
+mod inputs;
+#[path = "eval_models.rs"]
+mod models;
+
 use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::Args;
-use evgate_eval::{write_report, EvalConfig, Evaluation, LoadedModel, Report};
-use evgate_io::sequence::LabelledSequence;
+use evgate_core::SensorSize;
+use evgate_eval::{write_report, EvalConfig, Evaluation, FlopTable, LoadedModel, Report};
 use evgate_model::{ModelRuntime, Provider, RuntimeOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
-/// The committed model, evaluated when no `--model` is given.
-const DEFAULT_MODEL: &str = "models/evgate-S.onnx";
-/// Where the training code's FLOP counter writes its table.
-const DEFAULT_FLOPS_TABLE: &str = "models/training/runs/flops.json";
+use inputs::{load_recording, InputOptions};
+use models::{select_models, ModelSpec, DEFAULT_MODEL};
 
-/// The table of `python -m evgate_train.flops`.
-#[derive(serde::Deserialize)]
-struct FlopsTable {
-    models: Vec<FlopsRow>,
-}
-
-#[derive(serde::Deserialize)]
-struct FlopsRow {
-    size: String,
-    /// The paper counts every method at 640×480.
-    #[serde(rename = "gflops-640x480")]
-    gflops_640x480: f64,
-}
+/// Where the network's parameters and GFLOPs are looked up when `--model-flops` is not given:
+/// the committed table first, then the training code's output folder.
+const DEFAULT_FLOPS_TABLES: [&str; 2] = [
+    "models/reports/flops.json",
+    "models/training/runs/flops.json",
+];
 
 /// Evaluate forecasts and baselines on labelled sequences and write a report.
 #[derive(Args)]
@@ -40,16 +36,32 @@ pub struct EvalArgs {
     /// Root folder of the simulator's suite (as written by `evgate sim suite`).
     #[arg(long, default_value = "data/suite")]
     pub suite: PathBuf,
-    /// Labelled sequence files (.npz, docs/sequence-format.md) to evaluate instead of a split.
-    #[arg(long = "sequence", value_name = "FILE")]
-    pub sequences: Vec<PathBuf>,
-    /// ONNX model(s); the first is the model under test (its current mask also feeds the
-    /// no-forecast and linear baselines), others appear in the ablation and model-size tables.
-    /// Default: models/evgate-S.onnx when it exists.
-    #[arg(long = "model", value_name = "FILE")]
-    pub models: Vec<PathBuf>,
+    /// Recordings to evaluate instead of a split (repeatable): a simulator sequence (.npz,
+    /// docs/sequence-format.md; every metric), or any event file evgate-io reads (DSEC
+    /// events.h5 when built with the `dsec` feature, RAW, AEDAT 4, …; no ground truth: kept
+    /// ratio, event rates, runtime and prediction age only).
+    #[arg(long = "input", visible_alias = "sequence", value_name = "PATH")]
+    pub inputs: Vec<PathBuf>,
+    /// Averaging group of every --input recording (default: a simulator sequence's preset,
+    /// else the name of the folder holding the file).
+    #[arg(long)]
+    pub group: Option<String>,
+    /// Sensor size WxH for event files whose header gives none (e.g. 640x480).
+    #[arg(long, value_parser = crate::info::parse_sensor_size)]
+    pub sensor: Option<SensorSize>,
+    /// ONNX model as NAME=PATH or PATH (named by its file stem), repeatable. The first is the
+    /// model under test: its current mask feeds the no-forecast and linear baselines. Size,
+    /// ATC variant and training steps come from each file's `evgate.*` metadata and label its
+    /// rows in the ablation (Table VI) and model-size (Table VII) tables. Default:
+    /// models/evgate-S.onnx when it exists.
+    #[arg(long = "model", value_name = "[NAME=]PATH")]
+    pub models: Vec<ModelSpec>,
+    /// Also evaluate every .onnx file of this folder (named by file stem, after the --model
+    /// ones; files already given are skipped), e.g. models/ablation.
+    #[arg(long, value_name = "DIR")]
+    pub ablation_models: Option<PathBuf>,
     /// Evaluate the baselines only (no-forecast and linear then start from the ground truth).
-    #[arg(long, conflicts_with = "models")]
+    #[arg(long, conflicts_with_all = ["models", "ablation_models"])]
     pub no_model: bool,
     /// Folder for report.json, report.md and the plots (created if missing).
     #[arg(long, default_value = "reports/eval")]
@@ -74,8 +86,9 @@ pub struct EvalArgs {
     /// ONNX Runtime threads per operator.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
-    /// Per-size GFLOPs of the network (the JSON of `python -m evgate_train.flops`) for the
-    /// runtime table; default: models/training/runs/flops.json when it exists.
+    /// Parameters and GFLOPs per model size (the JSON of `python -m evgate_train.flops`) for
+    /// tables III and VII; default: models/reports/flops.json, else
+    /// models/training/runs/flops.json, when present.
     #[arg(long)]
     pub model_flops: Option<PathBuf>,
     /// Print the overall summary as JSON on stdout instead of text.
@@ -104,13 +117,13 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         config.max_seconds_per_sequence = Some(seconds);
     }
 
-    let (split, mut paths) = if args.sequences.is_empty() {
+    let (split, mut paths) = if args.inputs.is_empty() {
         (
             Some(args.split.clone()),
             split_sequences(&args.suite, &args.split)?,
         )
     } else {
-        (None, args.sequences.clone())
+        (None, args.inputs.clone())
     };
     paths = select(paths, &args.presets, args.max_sequences);
     if paths.is_empty() {
@@ -121,20 +134,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         );
     }
 
-    let model_paths = if args.no_model {
+    let model_specs = if args.no_model {
         Vec::new()
-    } else if args.models.is_empty() {
-        let default = PathBuf::from(DEFAULT_MODEL);
-        if default.is_file() {
-            vec![default]
-        } else {
-            tracing::warn!(
-                "{DEFAULT_MODEL} not found and no --model given: evaluating the baselines only"
-            );
-            Vec::new()
-        }
     } else {
-        args.models.clone()
+        select_models(
+            &args.models,
+            args.ablation_models.as_deref(),
+            Path::new(DEFAULT_MODEL),
+        )?
     };
     let options = RuntimeOptions {
         provider: args.provider,
@@ -142,16 +149,28 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         ..RuntimeOptions::default()
     };
     let mut models = Vec::new();
-    for path in &model_paths {
-        let runtime = ModelRuntime::load(path, options.clone())
-            .with_context(|| format!("cannot load model {}", path.display()))?;
-        let label = path.file_stem().map_or_else(
-            || path.display().to_string(),
-            |s| s.to_string_lossy().into_owned(),
+    for spec in &model_specs {
+        let runtime = ModelRuntime::load(&spec.path, options.clone())
+            .with_context(|| format!("cannot load model {}", spec.path.display()))?;
+        let metadata = runtime.metadata();
+        tracing::info!(
+            model = %spec.label,
+            path = %spec.path.display(),
+            size = metadata.model_size.label(),
+            atc = ?metadata.atc,
+            steps = metadata.train_steps,
+            "loaded"
         );
-        models.push(LoadedModel { label, runtime });
+        models.push(LoadedModel {
+            label: spec.label.clone(),
+            runtime,
+        });
     }
 
+    let input_options = InputOptions {
+        group: args.group.clone(),
+        sensor_size: args.sensor,
+    };
     let mut evaluation = Evaluation::new(config, models)?;
     let bar = ProgressBar::new(0);
     bar.set_style(
@@ -167,27 +186,34 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             paths.len(),
             path.display()
         ));
-        let sequence = LabelledSequence::read(path)
-            .with_context(|| format!("cannot read labelled sequence {}", path.display()))?;
-        bar.inc_length(evaluation.reference_count(&sequence, path) as u64);
+        let recording = load_recording(path, evaluation.config(), &input_options)?;
+        bar.inc_length(evaluation.reference_count(&recording) as u64);
         bar.set_message(format!(
             "sequence {}/{}: {}",
             index + 1,
             paths.len(),
             path.display()
         ));
-        let result = evaluation.evaluate_sequence(&sequence, path, || bar.inc(1))?;
-        tracing::info!(sequence = %result.name, preset = %result.preset, references = result.references, "evaluated");
+        let result = evaluation.evaluate(&recording, || bar.inc(1))?;
+        tracing::info!(
+            sequence = %result.name,
+            preset = %result.preset,
+            references = result.references,
+            ground_truth = ?result.ground_truth,
+            "evaluated"
+        );
     }
     bar.finish_and_clear();
 
     let mut report = evaluation.finish(split)?;
     let flops_path = args.model_flops.clone().or_else(|| {
-        let default = PathBuf::from(DEFAULT_FLOPS_TABLE);
-        default.is_file().then_some(default)
+        DEFAULT_FLOPS_TABLES
+            .iter()
+            .map(PathBuf::from)
+            .find(|p| p.is_file())
     });
     if let Some(path) = flops_path {
-        fill_model_gflops(&mut report, &path)?;
+        FlopTable::read(&path)?.apply(&mut report, &path);
     }
     let written = write_report(&report, &args.report)?;
     if args.json {
@@ -199,29 +225,6 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         for plot in &written.plots {
             println!("wrote {}", plot.display());
         }
-    }
-    Ok(())
-}
-
-/// Sets the GFLOPs of every model method from the training code's FLOP table.
-fn fill_model_gflops(report: &mut Report, path: &Path) -> anyhow::Result<()> {
-    let text = fs::read_to_string(path)
-        .with_context(|| format!("cannot read FLOP table {}", path.display()))?;
-    let table: FlopsTable = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "FLOP table {}: expected {{\"models\": [{{\"size\", \"gflops-640x480\"}}]}}",
-            path.display()
-        )
-    })?;
-    for method in &mut report.methods {
-        let Some(size) = method.model.as_ref().map(|m| m.size.clone()) else {
-            continue;
-        };
-        method.gflops = table
-            .models
-            .iter()
-            .find(|row| row.size == size)
-            .map(|row| row.gflops_640x480);
     }
     Ok(())
 }
@@ -325,25 +328,27 @@ fn print_summary(report: &Report) {
         report.sequences.len()
     );
     println!(
-        "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9}",
-        "method", "mIoU", "R@0.5", "SR@0.5", "pIoU", "evt F1", "run ms", "age ms"
+        "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9} {:>9}",
+        "method", "mIoU", "R@0.5", "SR@0.5", "pIoU", "evt F1", "kept", "run ms", "median", "age ms"
     );
     for method in &report.methods {
         let Some(summary) = report.overall.get(&method.name) else {
             continue;
         };
         let at = summary.at(headline);
+        let milliseconds =
+            |value: Option<f64>| value.map_or_else(|| "–".to_owned(), |v| format!("{v:.2}"));
         println!(
-            "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9}",
+            "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9} {:>9}",
             method.name,
             percent(at.and_then(|h| h.mean_iou)),
             percent(at.and_then(|h| h.instance_recall)),
             percent(at.and_then(|h| h.success_rate)),
             percent(summary.point_iou),
             percent(summary.events.f1),
-            summary
-                .runtime_ms_mean
-                .map_or_else(|| "–".to_owned(), |v| format!("{v:.2}")),
+            percent(summary.kept.kept_ratio),
+            milliseconds(summary.runtime_ms_mean),
+            milliseconds(summary.runtime_ms_median),
             summary
                 .prediction_age_ms
                 .map_or_else(|| "–".to_owned(), |v| format!("{v:.1}")),
