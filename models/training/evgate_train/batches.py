@@ -8,7 +8,7 @@ import torch
 
 from .augment import Augmentation, apply
 from .sequence import Sequence
-from .windows import Crop, FutureEvents, training_window
+from .windows import Crop, FutureEvents, reference_voxel, training_window
 
 
 class ChunkSamplingError(ValueError):
@@ -68,14 +68,30 @@ class ChunkSampler:
         self.augment = augment
         self.object_crop_share = object_crop_share
         self.rng = np.random.default_rng(seed)
+        # Full-frame voxel grids by (sequence, reference): the same windows recur across
+        # thousands of steps, and rebuilding a grid from events costs more than a step's forward pass.
+        self.voxels: dict[tuple[int, int], np.ndarray] = {}
+
+    def _voxel(self, sequence_index: int, reference: int) -> np.ndarray:
+        key = (sequence_index, reference)
+        if key not in self.voxels:
+            self.voxels[key] = reference_voxel(self.sequences[sequence_index], reference)
+        return self.voxels[key]
 
     def _chunk(self) -> list:
-        sequence = self.sequences[int(self.rng.integers(len(self.sequences)))]
+        index = int(self.rng.integers(len(self.sequences)))
+        sequence = self.sequences[index]
         start = int(self.rng.integers(len(sequence.ref_ts) - self.chunk_windows + 1))
         crop = self._crop(sequence, start)
         augmentation = Augmentation.draw(self.rng) if self.augment else Augmentation(False, False, False)
         return [
-            apply(training_window(sequence, start + i, crop, self.max_events, self.rng), augmentation, self.crop_size)
+            apply(
+                training_window(
+                    sequence, start + i, crop, self.max_events, self.rng, self._voxel(index, start + i)
+                ),
+                augmentation,
+                self.crop_size,
+            )
             for i in range(self.chunk_windows)
         ]
 

@@ -54,8 +54,9 @@ def export(
     train_steps: int,
 ) -> None:
     check_input_size(height, width)
-    network = network.eval()
-    wrapper = ContractWrapper(network)
+    # The wrapper must be in eval mode too: the exporter restores the wrapper's mode afterwards,
+    # recursively, and a network left in training mode would use batch statistics.
+    wrapper = ContractWrapper(network).eval()
     inputs = example_inputs(network, height, width)
     horizon_axis = {"horizons_ms": {0: "K"}, "future_mask_logits": {1: "K"}, "future_flow": {1: "K"}}
     path.parent.mkdir(parents=True, exist_ok=True)

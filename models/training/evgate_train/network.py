@@ -1,5 +1,11 @@
 """The suppression network: a recurrent ConvGRU U-Net that predicts the IMO mask now and, for
-each requested horizon, a flow that backward-warps the mask logits into the future."""
+each requested horizon, a flow that backward-warps the mask logits into the future.
+
+Built for a CPU budget of about 1 GFLOP per window at 346x260: the first encoder stage runs at
+half resolution (a stride-2 stem), the two shallow ConvGRUs use 1x1 gates and the deep ones
+depthwise-separable 3x3 gates, the decoders are narrow (the model's base width), the mask
+decoder ends at half resolution and the flow decoder, run once per horizon, at an eighth; both
+are upsampled bilinearly, and the mask logits are warped at full resolution."""
 
 from dataclasses import dataclass
 
@@ -21,6 +27,14 @@ class InputSizeError(ValueError):
     """A voxel grid whose height or width is not a multiple of 16."""
 
 
+# Encoder stages from this index on have 3x3 (depthwise-separable) ConvGRU gates; the shallow,
+# high-resolution ones have 1x1 gates and take their spatial context from the stride-2 convs.
+FIRST_SPATIAL_GRU_STAGE = 2
+# The flow decoder runs this many levels above the bottleneck (stride 16 -> 8), then its
+# velocity is upsampled bilinearly: its cost repeats per horizon.
+FLOW_DECODER_LEVELS = 1
+
+
 @dataclass(frozen=True)
 class NetworkConfig:
     size: str = "S"
@@ -31,6 +45,15 @@ class NetworkConfig:
     @property
     def base(self) -> int:
         return base_channels(self.size)
+
+    @property
+    def decoder_width(self) -> int:
+        return self.base
+
+    @property
+    def attention_width(self) -> int:
+        """ATC runs on the bottleneck projected to this width: its cost repeats per horizon."""
+        return 2 * self.base
 
     @property
     def state_channels(self) -> list[int]:
@@ -46,11 +69,17 @@ class NetworkOutput:
     states: list[torch.Tensor]
 
 
+def separable_convolution(channels: int) -> nn.Module:
+    return nn.Sequential(
+        nn.Conv2d(channels, channels, 3, padding=1, groups=channels, bias=False), nn.Conv2d(channels, channels, 1)
+    )
+
+
 class ResidualBlock(nn.Module):
     def __init__(self, channels: int):
         super().__init__()
-        self.first = nn.Conv2d(channels, channels, 3, padding=1)
-        self.second = nn.Conv2d(channels, channels, 3, padding=1)
+        self.first = separable_convolution(channels)
+        self.second = separable_convolution(channels)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return F.relu(x + self.second(F.relu(self.first(x))))
@@ -65,18 +94,26 @@ class SuppressionNetwork(nn.Module):
         self.downsamples = nn.ModuleList()
         self.recurrent = nn.ModuleList()
         previous = VOXEL_BINS
-        for width in channels:
-            self.downsamples.append(nn.Conv2d(previous, width, 3, stride=2, padding=1))
-            self.recurrent.append(ConvGRU(width, width))
+        for stage, width in enumerate(channels):
+            # Batch norm speeds up the short CPU training; at export it folds into the conv.
+            self.downsamples.append(
+                nn.Sequential(nn.Conv2d(previous, width, 3, stride=2, padding=1), nn.BatchNorm2d(width))
+            )
+            self.recurrent.append(ConvGRU(width, width, spatial=stage >= FIRST_SPATIAL_GRU_STAGE))
             previous = width
         self.residual = nn.Sequential(*[ResidualBlock(channels[-1]) for _ in range(config.residual_blocks)])
-        self.time_conditioning = TimeConditioning(channels[-1], config.time_conditioning, config.attention_heads)
-        shallow_to_deep = channels[:-1][::-1]
-        # The full-resolution mask level is half as wide: it dominates the cost at large inputs.
-        self.mask_decoder = Decoder(channels[-1], shallow_to_deep + [max(channels[0] // 2, 4)], 1)
-        # Flow runs once per horizon, so it stops at half resolution and is upsampled bilinearly:
-        # flow is smooth and this keeps K horizons cheap.
-        self.flow_decoder = Decoder(channels[-1], shallow_to_deep, 2)
+        skip_channels = channels[:-1][::-1]
+        # Ends at the first stage's resolution (half the input); logits are upsampled from there.
+        self.mask_decoder = Decoder(channels[-1], config.decoder_width, skip_channels, 1)
+        self.flow_features = nn.Conv2d(channels[-1], config.attention_width, 1)
+        self.time_conditioning = TimeConditioning(
+            config.attention_width, config.time_conditioning, config.attention_heads
+        )
+        # Runs once per horizon, so it stops coarse: flow is smooth and upsampled bilinearly.
+        self.flow_decoder = Decoder(
+            config.attention_width, config.decoder_width, skip_channels[:FLOW_DECODER_LEVELS], 2
+        )
+        self.flow_upsampling = 2 ** (STAGES - FLOW_DECODER_LEVELS)
 
     def initial_states(self, batch: int, height: int, width: int) -> list[torch.Tensor]:
         check_input_size(height, width)
@@ -96,14 +133,15 @@ class SuppressionNetwork(nn.Module):
             new_states.append(x)
         bottleneck = self.residual(x)
         skips = new_states[:-1][::-1]
-        mask_logits = self.mask_decoder(bottleneck, skips)
+        mask_logits = upsample(self.mask_decoder(bottleneck, self.mask_decoder.project_skips(skips)))
 
         def per_horizon(t: torch.Tensor) -> torch.Tensor:
             return t.unsqueeze(1).expand(-1, horizons, *t.shape[1:]).reshape(batch * horizons, *t.shape[1:])
 
         flat_horizons = horizons_ms.reshape(batch * horizons)
-        conditioned = self.time_conditioning(per_horizon(bottleneck), flat_horizons)
-        velocity = upsample(self.flow_decoder(conditioned, [per_horizon(s) for s in skips]))
+        conditioned = self.time_conditioning(per_horizon(self.flow_features(bottleneck)), flat_horizons)
+        flow_skips = [per_horizon(s) for s in self.flow_decoder.project_skips(skips[:FLOW_DECODER_LEVELS])]
+        velocity = upsample(self.flow_decoder(conditioned, flow_skips), self.flow_upsampling)
         flow = velocity * flat_horizons.view(-1, 1, 1, 1)
         future = backward_warp(per_horizon(mask_logits), flow)
         return NetworkOutput(

@@ -5,11 +5,16 @@ same query at every position, so every position attends identically and the cond
 adds one spatially constant vector. The position-aware variant adds the horizon encoding to
 each position's own (normalised) token, so each position can attend to the tokens that
 matter for its own future motion.
+
+Keys and values come from the tokens average-pooled 3x3 with stride 2: the attention's cost
+repeats per horizon and grows with the product of query and key counts, and the pooled map
+still covers every position.
 """
 
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 VARIANTS = ("position-aware", "reference", "none")
@@ -60,6 +65,8 @@ class TimeConditioning(nn.Module):
         channels = self.channels
         tokens = features.flatten(2).transpose(1, 2)
         normalised = self.token_norm(tokens)
+        pooled = F.avg_pool2d(features, 3, stride=2, padding=1, count_include_pad=False)
+        pooled_normalised = self.token_norm(pooled.flatten(2).transpose(1, 2))
         time = self.time_embedding(horizon_encoding(horizons_ms, channels))[:, None, :]
         if self.variant == "position-aware":
             query_input = normalised + time
@@ -71,8 +78,8 @@ class TimeConditioning(nn.Module):
             return x.reshape(batch, -1, self.heads, head_channels).transpose(1, 2)
 
         query = split_heads(self.query(query_input))
-        key = split_heads(self.key(normalised))
-        value = split_heads(self.value(normalised))
+        key = split_heads(self.key(pooled_normalised))
+        value = split_heads(self.value(pooled_normalised))
         weights = torch.softmax(query @ key.transpose(-1, -2) / math.sqrt(head_channels), dim=-1)
         attended = (weights @ value).transpose(1, 2).reshape(batch, -1, channels)
         return self.output(attended)

@@ -51,6 +51,17 @@ def learning_rate(step: int, total: int, peak: float, warmup: int) -> float:
     return peak * (0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * progress)))
 
 
+def forecast_ramped(weights: LossWeights, step: int, ramp_steps: int) -> LossWeights:
+    scale = min(1.0, step / ramp_steps) if ramp_steps > 0 else 1.0
+    return dataclasses.replace(
+        weights,
+        future_mask=weights.future_mask * scale,
+        flow=weights.flow * scale,
+        smoothness=weights.smoothness * scale,
+        contrast=weights.contrast * scale,
+    )
+
+
 def seed_everything(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
@@ -80,6 +91,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--smoothness-weight", type=float, default=0.05, help="Charbonnier smoothness weight")
     parser.add_argument("--contrast-weight", type=float, default=1.0, help="contrast-maximisation weight")
     parser.add_argument("--max-contrast-events", type=int, default=4000, help="events per future window for CM")
+    parser.add_argument(
+        "--contrast-last-window-only",
+        action="store_true",
+        help="compute contrast maximisation on each chunk's last window only (3x faster steps on CPU)",
+    )
+    parser.add_argument(
+        "--forecast-ramp-steps",
+        type=int,
+        default=0,
+        help="curriculum from horizon 0: the forecast terms (future mask, flow, smoothness, contrast) "
+        "ramp linearly from 0 to their weights over these steps, so the current mask is learnt first",
+    )
     parser.add_argument("--no-augment", action="store_true", help="disable flips and polarity inversion")
     parser.add_argument("--seed", type=int, default=7, help="seed of weights, sampling and augmentation")
     parser.add_argument(
@@ -174,10 +197,12 @@ def train(args: argparse.Namespace) -> Path:
             crop = args.crop
             states = network.initial_states(args.batch, crop, crop)
             sums: dict[str, torch.Tensor] = {}
-            for batch in batches:
+            step_weights = forecast_ramped(weights, step, args.forecast_ramp_steps)
+            for index, batch in enumerate(batches):
                 out = network(batch.voxel, batch.horizons_ms, states)
                 states = out.states
-                for key, value in window_objective(out, batch, weights).items():
+                with_contrast = not args.contrast_last_window_only or index == len(batches) - 1
+                for key, value in window_objective(out, batch, step_weights, with_contrast).items():
                     sums[key] = sums.get(key, 0.0) + value / len(batches)
             optimiser.zero_grad(set_to_none=True)
             sums["total"].backward()
@@ -191,7 +216,9 @@ def train(args: argparse.Namespace) -> Path:
             log_file.write(json.dumps(record) + "\n")
             log_file.flush()
             progress.update(1)
-            progress.set_postfix(loss=record["total"], mask=record["mask"], future=record["future_mask"])
+            progress.set_postfix(
+                loss=record["total"], mask=record["mask"], future=record["future_mask"], iou=record["mask_iou"]
+            )
             if (step + 1) % args.checkpoint_every == 0 or step + 1 in (last_step, *keep_steps):
                 save_checkpoint(checkpoint_path, network, optimiser, step + 1, digest, train_config)
             if step + 1 in keep_steps:

@@ -37,12 +37,11 @@ class TrainingWindow:
     future_events: list[FutureEvents]  # K entries
 
 
-def training_window(
-    sequence: Sequence, reference: int, crop: Crop, max_events: int, rng: np.random.Generator
-) -> TrainingWindow:
+def reference_voxel(sequence: Sequence, reference: int) -> np.ndarray:
+    """The full-frame voxel grid [2, H, W] of the 50 ms window ending at reference time `reference`."""
     t_end = int(sequence.ref_ts[reference])
     window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
-    full = voxel_grid(
+    return voxel_grid(
         sequence.events_t[window],
         sequence.events_x[window],
         sequence.events_y[window],
@@ -51,6 +50,13 @@ def training_window(
         sequence.width,
         sequence.height,
     )
+
+
+def training_window(
+    sequence: Sequence, reference: int, crop: Crop, max_events: int, rng: np.random.Generator, full: np.ndarray
+) -> TrainingWindow:
+    """`full` is `reference_voxel(sequence, reference)`, passed in so callers can cache it."""
+    t_end = int(sequence.ref_ts[reference])
     rows = slice(crop.top, crop.top + crop.size)
     cols = slice(crop.left, crop.left + crop.size)
     grid_index = sequence.grid_index(t_end)

@@ -63,3 +63,19 @@ def test_bad_sizes_and_variants_are_named():
         SuppressionNetwork(NetworkConfig(time_conditioning="global"))
     with pytest.raises(InputSizeError, match="50x32"):
         SuppressionNetwork(NetworkConfig(size="XS")).initial_states(1, 32, 50)
+
+
+def test_s_model_fits_the_cpu_budget():
+    """The S model's design target (issue 4): about 1 GFLOP per window at 346x260 with the
+    infer service's 8 horizons, and recurrent states at strides 2, 4, 8 and 16."""
+    from evgate_train.flops import gflops
+
+    network = SuppressionNetwork(NetworkConfig(size="S")).eval()
+    assert gflops(network, 346, 260, horizons=8) <= 1.0
+    assert [tuple(s.shape[2:]) for s in network.initial_states(1, 272, 352)] == [
+        (136, 176), (68, 88), (34, 44), (17, 22)
+    ]
+
+
+def test_l_model_has_the_papers_width():
+    assert NetworkConfig(size="L").state_channels == [64, 128, 256, 512]

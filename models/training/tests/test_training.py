@@ -7,7 +7,7 @@ from evgate_train.augment import Augmentation, apply
 from evgate_train.checkpoint import load_checkpoint
 from evgate_train.sequence import load_sequence
 from evgate_train.train import TrainingSetupError, build_parser, train
-from evgate_train.windows import Crop, training_window
+from evgate_train.windows import Crop, reference_voxel, training_window
 
 
 def _args(synthetic_dir, run_dir, steps, *extra):
@@ -52,7 +52,9 @@ def _object_event_share(window, mask_index: int = 0) -> float:
 def test_flips_move_masks_flow_and_events_alike(synthetic_dir):
     sequence = load_sequence(synthetic_dir / "slide-0.npz")
     rng = np.random.default_rng(0)
-    window = training_window(sequence, 2, Crop(left=0, top=0, size=48), 10_000, rng)
+    window = training_window(
+        sequence, 2, Crop(left=0, top=0, size=48), 10_000, rng, reference_voxel(sequence, 2)
+    )
     flipped = apply(window, Augmentation(True, True, True), 48)
     np.testing.assert_array_equal(flipped.mask, window.mask[::-1, ::-1])
     np.testing.assert_array_equal(flipped.voxel, -window.voxel[:, ::-1, ::-1])
