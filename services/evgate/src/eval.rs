@@ -2,8 +2,6 @@
 //! oracle) on a split of the simulator's suite or on labelled sequences, and writes the report
 //! (JSON, Markdown tables, PNG plots).
 
-#[path = "eval_inputs.rs"]
-mod inputs;
 #[path = "eval_models.rs"]
 mod models;
 
@@ -13,11 +11,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::Args;
 use evgate_core::SensorSize;
-use evgate_eval::{write_report, EvalConfig, Evaluation, FlopTable, LoadedModel, Report};
+use evgate_eval::{
+    read_recording, write_report, EvalConfig, Evaluation, FlopTable, InputOptions, LoadedModel,
+    Report,
+};
 use evgate_model::{ModelRuntime, Provider, RuntimeOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use inputs::{load_recording, InputOptions};
 use models::{select_models, ModelSpec, DEFAULT_MODEL};
 
 /// Where the network's parameters and GFLOPs are looked up when `--model-flops` is not given:
@@ -37,13 +37,15 @@ pub struct EvalArgs {
     #[arg(long, default_value = "data/suite")]
     pub suite: PathBuf,
     /// Recordings to evaluate instead of a split (repeatable): a simulator sequence (.npz,
-    /// docs/sequence-format.md; every metric), or any event file evgate-io reads (DSEC
-    /// events.h5 when built with the `dsec` feature, RAW, AEDAT 4, …; no ground truth: kept
-    /// ratio, event rates, runtime and prediction age only).
+    /// docs/sequence-format.md; every metric); an EVIMO recording (another .npz, an EVIMO2
+    /// sequence folder or an EVIMO text folder; masks at the ground-truth frames, no per-event
+    /// scores); or any event file evgate-io reads (DSEC events.h5 when built with the `dsec`
+    /// feature, RAW, AEDAT 4, …; no ground truth: kept ratio, event rates, runtime and
+    /// prediction age only).
     #[arg(long = "input", visible_alias = "sequence", value_name = "PATH")]
     pub inputs: Vec<PathBuf>,
     /// Averaging group of every --input recording (default: a simulator sequence's preset,
-    /// else the name of the folder holding the file).
+    /// else the name of the folder holding the file or sequence folder).
     #[arg(long)]
     pub group: Option<String>,
     /// Sensor size WxH for event files whose header gives none (e.g. 640x480).
@@ -186,7 +188,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             paths.len(),
             path.display()
         ));
-        let recording = load_recording(path, evaluation.config(), &input_options)?;
+        let recording = read_recording(path, evaluation.config(), &input_options)?;
         bar.inc_length(evaluation.reference_count(&recording) as u64);
         bar.set_message(format!(
             "sequence {}/{}: {}",
