@@ -127,6 +127,12 @@ def build_parser() -> argparse.ArgumentParser:
         "(short ablations that match a longer run step for step); 0 = run all --steps",
     )
     parser.add_argument("--resume", action="store_true", help="continue from run-dir/checkpoint.pt")
+    parser.add_argument(
+        "--init-from",
+        type=Path,
+        help="start from this checkpoint's weights (fine-tuning on other data): a fresh optimiser and "
+        "schedule, step 0, this run's manifest; the network configuration comes from the checkpoint",
+    )
     return parser
 
 
@@ -149,6 +155,9 @@ def train(args: argparse.Namespace) -> Path:
             )
         network, start_step, optimiser_state = checkpoint.network, checkpoint.step, checkpoint.optimiser_state
         log.info("resuming %s at step %d", checkpoint_path, start_step)
+    elif args.init_from is not None:
+        network = load_checkpoint(args.init_from).network
+        log.info("initialised from %s (%s, %s)", args.init_from, network.config.size, network.config.time_conditioning)
     else:
         seed_everything(args.seed)
         network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))

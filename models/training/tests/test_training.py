@@ -90,3 +90,31 @@ def test_stop_at_step_keeps_the_longer_schedule(synthetic_dir, tmp_path):
     assert [r["step"] for r in records] == [1, 2]
     assert records[1]["lr"] == pytest.approx(learning_rate(1, 4, 2e-3, 1))
     assert load_checkpoint(run / "checkpoint.pt").step == 2
+
+
+def test_init_from_starts_a_new_run_from_another_runs_weights(synthetic_dir, tmp_path):
+    import torch
+
+    source = tmp_path / "source"
+    train(_args(synthetic_dir, source, 2))
+    run = tmp_path / "fine-tune"
+    train(_args(synthetic_dir, run, 1, "--init-from", str(source / "checkpoint.pt"), "--stop-at-step", "1"))
+    records = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in records] == [1]
+    tuned, original = load_checkpoint(run / "checkpoint.pt"), load_checkpoint(source / "checkpoint.pt")
+    assert tuned.step == 1
+    # One small step away from the source weights, not from a fresh initialisation.
+    distance = sum(float((a - b).abs().sum()) for a, b in zip(tuned.network.parameters(), original.network.parameters()))
+    fresh = sum(float(p.abs().sum()) for p in tuned.network.parameters())
+    assert 0 < distance < 0.2 * fresh
+
+
+def test_forecast_ramp_scales_only_the_forecast_terms():
+    from evgate_train.objective import LossWeights
+    from evgate_train.train import forecast_ramped
+
+    weights = LossWeights(dice=0.5, positive=5.0, flow=0.1, contrast=1.0)
+    start, middle, done = (forecast_ramped(weights, step, 100) for step in (0, 50, 150))
+    assert (start.future_mask, start.flow, start.contrast) == (0.0, 0.0, 0.0)
+    assert middle.contrast == pytest.approx(0.5) and middle.future_mask == pytest.approx(0.5)
+    assert done == weights and (start.dice, start.positive) == (0.5, 5.0)
