@@ -102,20 +102,20 @@ impl Preset {
         let poster = TextureStyle {
             mean: 0.5,
             contrast: 0.9,
-            noise: 0.3,
-            shape_density: 1.6,
+            noise: 0.7,
+            shape_density: 2.0,
             stripes: 0.0,
         };
         let wood = TextureStyle {
             mean: 0.45,
-            contrast: 0.6,
-            noise: 0.4,
-            shape_density: 0.3,
+            contrast: 0.75,
+            noise: 0.6,
+            shape_density: 0.7,
             stripes: 0.8,
         };
         let toy = TextureStyle {
             mean: 0.55,
-            contrast: 0.9,
+            contrast: 0.75,
             noise: 0.3,
             shape_density: 2.0,
             stripes: 0.3,
@@ -139,7 +139,7 @@ impl Preset {
                 min_objects: 1,
                 max_objects: 2,
                 object_speed_mps: 0.6,
-                object_size_m: [0.15, 0.35],
+                object_size_m: [0.12, 0.3],
                 flat_object_share: 0.0,
                 ego_rotation_rad_s: 0.5,
                 ego_translation_mps: 0.15,
@@ -150,9 +150,9 @@ impl Preset {
             Preset::Wall => SceneParams {
                 layout: Layout::Wall,
                 min_objects: 1,
-                max_objects: 3,
-                object_speed_mps: 0.7,
-                object_size_m: [0.15, 0.3],
+                max_objects: 2,
+                object_speed_mps: 0.5,
+                object_size_m: [0.1, 0.22],
                 flat_object_share: 0.4,
                 ego_rotation_rad_s: 0.5,
                 ego_translation_mps: 0.12,

@@ -86,7 +86,9 @@ fn polarity_is_balanced_under_motion() {
 
 #[test]
 fn moving_objects_cause_a_minority_of_events() {
-    let mut shares = Vec::new();
+    // Real scenes (EVIMO) have roughly 2–20 % of events on moving objects, depending on the
+    // sequence: every EVIMO-like preset's median over seeds lies in that band and no seed
+    // strays far above it.
     for preset in [
         Preset::Boxes,
         Preset::Floor,
@@ -95,21 +97,23 @@ fn moving_objects_cause_a_minority_of_events() {
         Preset::Fast,
         Preset::Tabletop,
     ] {
-        let (_, events) = run(small(preset), 5, 300_000);
-        let share = events.iter().filter(|e| e.label != 0).count() as f64 / events.len() as f64;
+        let mut shares: Vec<f64> = (1..=5)
+            .map(|seed| {
+                let (_, events) = run(small(preset), seed, 300_000);
+                events.iter().filter(|e| e.label != 0).count() as f64 / events.len() as f64
+            })
+            .collect();
         assert!(
-            share < 0.35,
-            "{preset}: {:.1} % of events from objects",
-            share * 100.0
+            shares.iter().all(|&share| share < 0.25),
+            "{preset}: object-event shares {shares:?} (seeds 1–5), one above 25 %"
         );
-        shares.push(share);
+        shares.sort_by(f64::total_cmp);
+        let median = shares[shares.len() / 2];
+        assert!(
+            (0.02..=0.2).contains(&median),
+            "{preset}: median object-event share {median:.3} of {shares:?} outside 2–20 %"
+        );
     }
-    shares.sort_by(f64::total_cmp);
-    let median = shares[shares.len() / 2];
-    assert!(
-        (0.02..=0.2).contains(&median),
-        "median object share {median:.3} of {shares:?}"
-    );
 }
 
 #[test]
