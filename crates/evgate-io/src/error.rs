@@ -40,4 +40,11 @@ pub enum DecodeError {
     },
     #[error("{path}: {problem}")]
     Unrecognised { path: PathBuf, problem: String },
+    /// A problem in one dataset of an HDF5 file (DSEC).
+    #[error("{path}: dataset `{dataset}`: {problem}")]
+    Dataset {
+        path: PathBuf,
+        dataset: String,
+        problem: String,
+    },
 }

@@ -10,6 +10,8 @@ pub mod aedat4;
 pub mod csv;
 pub mod csv_writer;
 pub mod dat;
+#[cfg(feature = "dsec")]
+pub mod dsec;
 pub mod error;
 pub mod evimo;
 pub mod evimo2_events;

@@ -62,6 +62,8 @@ event_reader!(CsvDecoder, Format::Csv);
 event_reader!(NativeDecoder, Format::Native);
 event_reader!(EvimoDecoder, Format::EvimoNpz);
 event_reader!(Evimo2EventsDecoder, Format::Evimo2Folder);
+#[cfg(feature = "dsec")]
+event_reader!(crate::dsec::DsecReader, Format::Dsec);
 
 /// Header key of the time offset our EVT 3.0 encoder declares (see `evt3_writer`).
 const EVT3_TIME_OFFSET_KEY: &str = "evgate_time_offset_us";
