@@ -215,6 +215,7 @@ fn sizes(report: &Report, with_masks: &[bool]) -> String {
         cells.extend(headline_miou_cells(report, &method.name, with_masks));
         out += &row(&cells);
     }
+    out.push('\n');
     out
 }
 

@@ -330,7 +330,7 @@ fn print_summary(report: &Report) {
         report.sequences.len()
     );
     println!(
-        "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9} {:>9}",
+        "{:<36} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9} {:>9}",
         "method", "mIoU", "R@0.5", "SR@0.5", "pIoU", "evt F1", "kept", "run ms", "median", "age ms"
     );
     for method in &report.methods {
@@ -341,7 +341,7 @@ fn print_summary(report: &Report) {
         let milliseconds =
             |value: Option<f64>| value.map_or_else(|| "–".to_owned(), |v| format!("{v:.2}"));
         println!(
-            "{:<28} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9} {:>9}",
+            "{:<36} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9} {:>9}",
             method.name,
             percent(at.and_then(|h| h.mean_iou)),
             percent(at.and_then(|h| h.instance_recall)),
