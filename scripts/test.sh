@@ -7,14 +7,15 @@ cd "$(dirname "$0")/.."
 
 bash scripts/fetch-onnxruntime.sh
 bash models/training/setup.sh
+bash scripts/setup-hdf5.sh
 
 echo "== cargo fmt --check"
 cargo fmt --all --check
 echo "== cargo clippy"
-cargo clippy --workspace --all-targets -- -D warnings
+cargo clippy --workspace --all-targets --features evgate/dsec -- -D warnings
 echo "== cargo build of the fuzz targets (fuzz/, its own workspace)"
 cargo build --manifest-path fuzz/Cargo.toml
 echo "== cargo test"
-cargo test --workspace
+cargo test --workspace --features evgate/dsec
 echo "== pytest (models/training)"
 models/training/.venv/bin/python -m pytest -q models/training/tests

@@ -12,7 +12,9 @@
 //!
 //! A `TIME_LOW` smaller than the previous one under the same `TIME_HIGH` is taken at face value
 //! (the event time steps back and the regression is counted): it is not a wrap, since the
-//! sensor sends a new `TIME_HIGH` whenever bit 12 changes.
+//! sensor sends a new `TIME_HIGH` whenever bit 12 changes. [`Evt3TimeLow::CarryOnStepBack`]
+//! reproduces the reader that treats every `TIME_LOW` step back as a carry (expelliarmus,
+//! which made `shared/data/real/evt3_sample.npy`).
 
 use evgate_core::{Event, SensorSize};
 
@@ -21,6 +23,55 @@ use crate::report::{Admission, DecodeReport};
 use crate::source::ByteSource;
 
 const TIME_HIGH_WRAP: i64 = 1 << 24;
+/// What one carry of the 12-bit `TIME_LOW` adds under [`Evt3TimeLow::CarryOnStepBack`].
+const TIME_LOW_CARRY: i64 = 1 << 12;
+
+/// How a `TIME_LOW` smaller than the previous one is read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Evt3TimeLow {
+    /// The EVT 3.0 rule: time = `TIME_HIGH` << 12 | `TIME_LOW`; a step back under the same
+    /// `TIME_HIGH` stays a step back (counted as a time regression).
+    #[default]
+    Evt3,
+    /// Compatibility with expelliarmus: every `TIME_LOW` smaller than the previous `TIME_LOW`
+    /// is a carry that adds 4096 µs to this and every later time — also the ordinary restart
+    /// of `TIME_LOW` after a new `TIME_HIGH`, which then counts twice.
+    CarryOnStepBack,
+}
+
+impl Evt3TimeLow {
+    pub const NAMES: [&'static str; 2] = ["evt3", "carry-on-step-back"];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Evt3TimeLow::Evt3 => Self::NAMES[0],
+            Evt3TimeLow::CarryOnStepBack => Self::NAMES[1],
+        }
+    }
+}
+
+impl std::fmt::Display for Evt3TimeLow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("`{0}` is not an EVT 3.0 TIME_LOW rule (accepted: evt3, carry-on-step-back)")]
+pub struct UnknownTimeLowRule(pub String);
+
+impl std::str::FromStr for Evt3TimeLow {
+    type Err = UnknownTimeLowRule;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match text {
+            "evt3" => Ok(Evt3TimeLow::Evt3),
+            "carry-on-step-back" => Ok(Evt3TimeLow::CarryOnStepBack),
+            other => Err(UnknownTimeLowRule(other.to_owned())),
+        }
+    }
+}
 
 pub struct Evt3Decoder {
     source: ByteSource,
@@ -31,6 +82,7 @@ pub struct Evt3Decoder {
     y: u16,
     base_x: u16,
     vector_on: bool,
+    time_low_rule: Evt3TimeLow,
 }
 
 impl Evt3Decoder {
@@ -45,7 +97,14 @@ impl Evt3Decoder {
             y: 0,
             base_x: 0,
             vector_on: false,
+            time_low_rule: Evt3TimeLow::default(),
         }
+    }
+
+    /// Reads `TIME_LOW` steps back by `rule` instead of the EVT 3.0 rule.
+    pub fn with_time_low_rule(mut self, rule: Evt3TimeLow) -> Self {
+        self.time_low_rule = rule;
+        self
     }
 
     pub fn sensor_size(&self) -> SensorSize {
@@ -107,7 +166,15 @@ impl Evt3Decoder {
                         }
                         self.base_x = self.base_x.saturating_add(width);
                     }
-                    0x6 => self.time_low = (word & 0xfff) as i64,
+                    0x6 => {
+                        let time_low = (word & 0xfff) as i64;
+                        if self.time_low_rule == Evt3TimeLow::CarryOnStepBack
+                            && time_low < self.time_low
+                        {
+                            self.wraps = self.wraps.saturating_add(TIME_LOW_CARRY);
+                        }
+                        self.time_low = time_low;
+                    }
                     0x8 => {
                         let time_high = (word & 0xfff) as i64;
                         if time_high < self.time_high {
@@ -184,6 +251,37 @@ mod tests {
         );
         assert_eq!(report.time_regressions, 1);
         assert_eq!(report.first_time_regression_index, Some(2));
+    }
+
+    #[test]
+    fn carry_rule_adds_4096_on_every_time_low_step_back() {
+        let words = [
+            0x8001, 0x6100, 0x2001, 0x6050, 0x2001, 0x8002, 0x6000, 0x2001,
+        ];
+        let bytes: Vec<u8> = words.iter().flat_map(|w: &u16| w.to_le_bytes()).collect();
+        let source = ByteSource::new("mem.raw".into(), Box::new(Cursor::new(bytes)));
+        let mut decoder = Evt3Decoder::new(source, SensorSize::new(8, 8), 0)
+            .with_time_low_rule(Evt3TimeLow::CarryOnStepBack);
+        let mut events = Vec::new();
+        decoder.read_chunk(&mut events).unwrap();
+        let times: Vec<i64> = events.iter().map(|e| e.t).collect();
+        assert_eq!(
+            times,
+            vec![
+                (1 << 12) + 0x100,
+                (1 << 12) + 0x50 + 4096,
+                (2 << 12) + 2 * 4096
+            ]
+        );
+        assert_eq!(
+            "carry-on-step-back".parse::<Evt3TimeLow>().unwrap(),
+            Evt3TimeLow::CarryOnStepBack
+        );
+        let err = "wrap".parse::<Evt3TimeLow>().unwrap_err().to_string();
+        assert!(
+            err.contains("`wrap`") && err.contains("evt3, carry-on-step-back"),
+            "{err}"
+        );
     }
 
     #[test]

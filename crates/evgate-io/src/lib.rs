@@ -38,8 +38,9 @@ pub use error::DecodeError;
 pub use evimo_recording::{
     EvimoError, EvimoLayout, EvimoRecording, GtFrame, GtFrameInfo, GtFrames,
 };
+pub use evt3::Evt3TimeLow;
 pub use format::{detect, Format};
-pub use reader::{open, open_with, read_all, EventReader, OpenOptions};
+pub use reader::{open, open_with, open_with_time_low_rule, read_all, EventReader, OpenOptions};
 pub use report::DecodeReport;
 pub use sequence::{LabelledSequence, SequenceError};
 pub use writer::{create, create_as, EncodeError, EventWriter};

@@ -12,7 +12,7 @@ use crate::evimo::EvimoDecoder;
 use crate::evimo2_events::Evimo2EventsDecoder;
 use crate::evimo_recording::{EvimoError, EvimoRecording};
 use crate::evt2::Evt2Decoder;
-use crate::evt3::Evt3Decoder;
+use crate::evt3::{Evt3Decoder, Evt3TimeLow};
 use crate::format::{detect, Format};
 use crate::header::PropheseeHeader;
 use crate::native::NativeDecoder;
@@ -89,6 +89,16 @@ pub fn open_with(
     path: impl AsRef<Path>,
     options: &OpenOptions,
 ) -> Result<Box<dyn EventReader>, DecodeError> {
+    open_with_time_low_rule(path, options, Evt3TimeLow::default())
+}
+
+/// [`open_with`], reading EVT 3.0 `TIME_LOW` steps back by `time_low_rule` (other formats
+/// ignore it).
+pub fn open_with_time_low_rule(
+    path: impl AsRef<Path>,
+    options: &OpenOptions,
+    time_low_rule: Evt3TimeLow,
+) -> Result<Box<dyn EventReader>, DecodeError> {
     let path = path.as_ref();
     let format = match options.format {
         Some(format) => format,
@@ -106,7 +116,7 @@ pub fn open_with(
         source,
     })?;
     let source = ByteSource::new(path.to_path_buf(), Box::new(file));
-    from_source(format, source, options)
+    from_source(format, source, options, time_low_rule)
 }
 
 /// Decodes `bytes` held in memory as `format`; `name` is used in error messages.
@@ -121,13 +131,14 @@ pub fn from_bytes(
         format: Some(format),
         sensor_size,
     };
-    from_source(format, source, &options)
+    from_source(format, source, &options, Evt3TimeLow::default())
 }
 
 fn from_source(
     format: Format,
     mut source: ByteSource,
     options: &OpenOptions,
+    time_low_rule: Evt3TimeLow,
 ) -> Result<Box<dyn EventReader>, DecodeError> {
     Ok(match format {
         Format::Evt2 | Format::Evt3 | Format::Dat => {
@@ -153,7 +164,10 @@ fn from_source(
                         })?,
                         None => 0,
                     };
-                    Box::new(Evt3Decoder::new(source, sensor_size, time_offset))
+                    Box::new(
+                        Evt3Decoder::new(source, sensor_size, time_offset)
+                            .with_time_low_rule(time_low_rule),
+                    )
                 }
                 _ => Box::new(DatDecoder::new(source, sensor_size)?),
             }

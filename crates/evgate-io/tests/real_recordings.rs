@@ -122,3 +122,22 @@ fn every_real_recording_decodes_inside_its_sensor() {
         assert_eq!(regressions as u64, report.time_regressions, "{name}");
     }
 }
+
+/// With the `carry-on-step-back` rule (expelliarmus' reading of `TIME_LOW` steps back) the
+/// decode equals the reference in every field of every row.
+#[test]
+fn evt3_sample_with_the_carry_rule_equals_the_reference_exactly() {
+    let reference = reference_events();
+    let mut reader = evgate_io::open_with_time_low_rule(
+        real("evt3_sample.raw"),
+        &evgate_io::OpenOptions::default(),
+        evgate_io::Evt3TimeLow::CarryOnStepBack,
+    )
+    .unwrap();
+    let events = read_all(reader.as_mut()).unwrap();
+    assert_eq!(events.len(), reference.len());
+    for (i, (ours, theirs)) in events.iter().zip(&reference).enumerate() {
+        assert_eq!(ours, theirs, "row {i}");
+    }
+    assert!(reader.report().is_clean(), "{:?}", reader.report());
+}

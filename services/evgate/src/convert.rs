@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Args;
 use evgate_core::SensorSize;
 use evgate_io::reader::UNBOUNDED_SENSOR;
-use evgate_io::{create, open_with, DecodeReport, Format, OpenOptions};
+use evgate_io::{create, open_with_time_low_rule, DecodeReport, Evt3TimeLow, Format, OpenOptions};
 use serde::Serialize;
 
 use crate::info::{byte_progress, inspect, parse_sensor_size};
@@ -26,6 +26,10 @@ pub struct ConvertArgs {
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub json: bool,
+    /// EVT 3.0 input only: how a TIME_LOW smaller than the previous one is read: `evt3` (the
+    /// format's rule: a step back) or `carry-on-step-back` (adds 4096 µs, as expelliarmus does).
+    #[arg(long, default_value = "evt3")]
+    pub evt3_time_low: Evt3TimeLow,
 }
 
 #[derive(Serialize)]
@@ -55,7 +59,7 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<()> {
         sensor_size: args.sensor,
         ..OpenOptions::default()
     };
-    let mut reader = open_with(&args.input, &options)?;
+    let mut reader = open_with_time_low_rule(&args.input, &options, args.evt3_time_low)?;
     let mut sensor_size = reader.sensor_size();
     if sensor_size == UNBOUNDED_SENSOR && output_format != Format::Csv {
         // Text carries no sensor size: a first pass measures the extent of the events.
@@ -63,7 +67,7 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<()> {
             "{}: no --sensor given; measuring the event extent first",
             args.input.display()
         );
-        let info = inspect(&args.input, None)?;
+        let info = inspect(&args.input, None, args.evt3_time_low)?;
         sensor_size = SensorSize::new(
             info.max_x.map_or(1, |x| x.saturating_add(1)),
             info.max_y.map_or(1, |y| y.saturating_add(1)),

@@ -8,13 +8,14 @@ use anyhow::Context;
 use clap::Args;
 use evgate_core::SensorSize;
 use evgate_io::reader::UNBOUNDED_SENSOR;
-use evgate_io::{open_with, DecodeReport, EventReader, OpenOptions};
+use evgate_io::{open_with_time_low_rule, DecodeReport, EventReader, Evt3TimeLow, OpenOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Event file: .raw (EVT 2.0/3.0), .dat, .aedat4, .csv/.txt, .evg (detected from content).
+    /// Event file: .raw (EVT 2.0/3.0), .dat, .aedat4, .csv/.txt, .evg, EVIMO .npz, an EVIMO2
+    /// sequence folder, DSEC .h5 (builds with `--features dsec`); detected from content.
     pub file: PathBuf,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -23,6 +24,10 @@ pub struct InfoArgs {
     /// header otherwise.
     #[arg(long, value_parser = parse_sensor_size)]
     pub sensor: Option<SensorSize>,
+    /// EVT 3.0 only: how a TIME_LOW smaller than the previous one is read: `evt3` (the format's
+    /// rule: a step back) or `carry-on-step-back` (adds 4096 µs, as expelliarmus does).
+    #[arg(long, default_value = "evt3")]
+    pub evt3_time_low: Evt3TimeLow,
 }
 
 pub fn parse_sensor_size(text: &str) -> Result<SensorSize, String> {
@@ -56,6 +61,7 @@ pub struct FileInfo {
     pub min_t_us: Option<i64>,
     pub max_t_us: Option<i64>,
     pub report: DecodeReport,
+    pub evt3_time_low: Evt3TimeLow,
     pub decode_seconds: f64,
 }
 
@@ -73,7 +79,11 @@ pub fn byte_progress(path: &Path, bytes: u64) -> ProgressBar {
     bar
 }
 
-pub fn inspect(file: &Path, sensor: Option<SensorSize>) -> anyhow::Result<FileInfo> {
+pub fn inspect(
+    file: &Path,
+    sensor: Option<SensorSize>,
+    evt3_time_low: Evt3TimeLow,
+) -> anyhow::Result<FileInfo> {
     let bytes = std::fs::metadata(file)
         .with_context(|| format!("{}: cannot read metadata", file.display()))?
         .len();
@@ -82,7 +92,7 @@ pub fn inspect(file: &Path, sensor: Option<SensorSize>) -> anyhow::Result<FileIn
         ..OpenOptions::default()
     };
     let started = Instant::now();
-    let mut reader: Box<dyn EventReader> = open_with(file, &options)?;
+    let mut reader: Box<dyn EventReader> = open_with_time_low_rule(file, &options, evt3_time_low)?;
     let progress = byte_progress(file, bytes);
     let mut chunk = Vec::new();
     let (mut on, mut count) = (0u64, 0u64);
@@ -135,12 +145,13 @@ pub fn inspect(file: &Path, sensor: Option<SensorSize>) -> anyhow::Result<FileIn
         min_t_us: min_t,
         max_t_us: max_t,
         report: reader.report().clone(),
+        evt3_time_low,
         decode_seconds: started.elapsed().as_secs_f64(),
     })
 }
 
 pub fn run(args: InfoArgs) -> anyhow::Result<()> {
-    let info = inspect(&args.file, args.sensor)?;
+    let info = inspect(&args.file, args.sensor, args.evt3_time_low)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&info)?);
         return Ok(());
