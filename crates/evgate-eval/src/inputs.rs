@@ -361,6 +361,51 @@ mod tests {
         );
     }
 
+    /// evgate-io's DSEC fixture: 3000 events on a 640×480 sensor over 27 ms, times stored
+    /// relative to `t_offset` 49 599 300 523 µs (see its make_dsec_fixture.py).
+    #[cfg(feature = "dsec")]
+    #[test]
+    fn dsec_recordings_are_scored_without_ground_truth() {
+        let path = Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../evgate-io/tests/fixtures/dsec_events.h5"
+        ));
+        // The fixture is shorter than one 50 ms window: score 10 ms windows.
+        let config = EvalConfig {
+            window_ms: 10,
+            gate_span_ms: 10,
+            horizons_ms: vec![0, 10, 20],
+            headline_horizon_ms: 20,
+            ..EvalConfig::default()
+        };
+        let options = InputOptions {
+            group: Some("dsec".to_owned()),
+            sensor_size: None,
+        };
+        let recording = read_recording(path, &config, &options).unwrap();
+        assert_eq!(recording.ground_truth(), GroundTruth::EventsOnly);
+        assert_eq!(recording.sensor_size, SensorSize::new(640, 480));
+        assert_eq!(recording.events.len(), 3000);
+        let first = 49_599_300_523 + 1000;
+        assert_eq!(recording.events[0].t, first);
+        assert_eq!(
+            recording.reference_times(&config),
+            [first + 10_000, first + 20_000]
+        );
+
+        let mut evaluation = Evaluation::new(config, Vec::new()).unwrap();
+        evaluation.evaluate(&recording, || {}).unwrap();
+        let report = evaluation.finish(None).unwrap();
+        let oms = &report.overall["oms"];
+        // [t, t + 10 ms) of the two references (relative 11 and 21 ms): 714 events (the 5 ms
+        // gap lies in the first span), then 857; 1571 events over 20 ms.
+        assert_eq!(oms.kept.judged_events, 714 + 857);
+        let rate = oms.kept.event_rate_hz.unwrap();
+        assert!((rate - 78_550.0).abs() < 1e-6, "{rate}");
+        assert!(oms.kept.kept_ratio.is_some());
+        assert!(oms.horizons.iter().all(|h| h.mean_iou.is_none()));
+    }
+
     #[test]
     fn unreadable_inputs_name_the_file() {
         let error = read_recording(
