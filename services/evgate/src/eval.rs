@@ -384,6 +384,49 @@ mod tests {
         );
     }
 
+    #[derive(clap::Parser)]
+    struct Command {
+        #[command(flatten)]
+        eval: EvalArgs,
+    }
+
+    #[test]
+    fn an_event_file_without_ground_truth_gives_a_report_with_null_truth_metrics() {
+        use clap::Parser;
+        let folder = tempfile::tempdir().unwrap();
+        let input = folder.path().join("events.csv");
+        let text: String = (0..3000)
+            .map(|k| format!("{} {} {} {}\n", k * 100, k * 7 % 40, k * 3 % 30, k % 2))
+            .collect();
+        fs::write(&input, text).unwrap();
+        let report_folder = folder.path().join("report");
+        let command = Command::parse_from([
+            "eval".as_ref(),
+            "--input".as_ref(),
+            input.as_os_str(),
+            "--sensor".as_ref(),
+            "40x30".as_ref(),
+            "--group".as_ref(),
+            "drive".as_ref(),
+            "--no-model".as_ref(),
+            "--report".as_ref(),
+            report_folder.as_os_str(),
+        ]);
+        run(command.eval).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(report_folder.join("report.json")).unwrap())
+                .unwrap();
+        let sequence = &json["sequences"][0];
+        assert_eq!(sequence["ground-truth"], "events-only");
+        assert_eq!(sequence["preset"], "drive");
+        let oms = &json["overall"]["oms"];
+        assert!(oms["horizons"][10]["mean-iou"].is_null());
+        assert!(oms["point-iou"].is_null());
+        assert!(oms["kept"]["event-rate-hz"].as_f64().unwrap() > 0.0);
+        let markdown = fs::read_to_string(report_folder.join("report.md")).unwrap();
+        assert!(markdown.contains("| drive | n/a — no masks in this recording |"));
+    }
+
     #[test]
     fn selection_is_round_robin_over_presets() {
         let paths: Vec<PathBuf> = ["a-1", "a-2", "a-3", "b-1", "c-1", "c-2"]
