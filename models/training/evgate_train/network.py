@@ -141,8 +141,11 @@ class SuppressionNetwork(nn.Module):
         flat_horizons = horizons_ms.reshape(batch * horizons)
         conditioned = self.time_conditioning(per_horizon(self.flow_features(bottleneck)), flat_horizons)
         flow_skips = [per_horizon(s) for s in self.flow_decoder.project_skips(skips[:FLOW_DECODER_LEVELS])]
-        velocity = upsample(self.flow_decoder(conditioned, flow_skips), self.flow_upsampling)
-        flow = velocity * flat_horizons.view(-1, 1, 1, 1)
+        coarse_velocity = self.flow_decoder(conditioned, flow_skips)
+        velocity = upsample(coarse_velocity, self.flow_upsampling)
+        # Upsampling is linear, so scaling by the horizon before it gives the same flow with a
+        # full-resolution multiply less per horizon; the exported graph keeps only this path.
+        flow = upsample(coarse_velocity * flat_horizons.view(-1, 1, 1, 1), self.flow_upsampling)
         future = backward_warp(per_horizon(mask_logits), flow)
         return NetworkOutput(
             mask_logits=mask_logits,
