@@ -322,7 +322,12 @@ impl DsecReader {
             dataset_error(
                 &self.path,
                 "events/t",
-                format!("rows {}..{} unreadable: {e}", range.start, range.end),
+                format!(
+                    "rows {}..{} unreadable: {e}{}",
+                    range.start,
+                    range.end,
+                    filter_hint(&e)
+                ),
             )
         })
     }
@@ -338,7 +343,7 @@ impl DsecReader {
                 dataset_error(
                     &self.path,
                     name,
-                    format!("rows {start}..{end} unreadable: {e}"),
+                    format!("rows {start}..{end} unreadable: {e}{}", filter_hint(&e)),
                 )
             };
             let xs = read_u16(&self.x, start..end).map_err(|e| unreadable("events/x", e))?;
@@ -415,6 +420,19 @@ impl DsecReader {
             }
         }
         Ok(out.len())
+    }
+}
+
+/// A missing compression filter is the usual cause of unreadable DSEC data: say how to get it.
+fn filter_hint(error: &hdf5_metno::Error) -> &'static str {
+    let text = error.to_string().to_lowercase();
+    if ["filter", "plugin", "directory"]
+        .iter()
+        .any(|word| text.contains(word))
+    {
+        " (DSEC compresses with the Blosc filter, id 32001: install it with scripts/setup-hdf5.sh or point HDF5_PLUGIN_PATH at a directory holding it)"
+    } else {
+        ""
     }
 }
 
