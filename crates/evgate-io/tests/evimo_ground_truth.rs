@@ -244,6 +244,24 @@ fn evimo2_folder_gives_times_object_ids_and_depth() {
     }
 }
 
+/// The same metadata saved by NumPy itself (fixtures/make_evimo_info_fixture.py): real pickles
+/// with memo references, NumPy float64 scalars and ids beyond i64.
+#[test]
+fn a_dataset_info_written_by_numpy_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    write_evimo2_folder(dir.path(), true);
+    std::fs::copy(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/fixtures/evimo2_dataset_info.npz"
+        ),
+        dir.path().join("dataset_info.npz"),
+    )
+    .unwrap();
+    let recording = EvimoRecording::open(dir.path()).unwrap();
+    check_frames(&recording, true);
+}
+
 fn write_single_npz(path: &Path, with_resolution: bool, frames_in_stack: usize) {
     let mut npz = NpzWriter::create(path, NpzCompression::Deflated).unwrap();
     let rows: Vec<f64> = events()
