@@ -237,15 +237,16 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         ("best of sweep", &report.oms_sweep.best),
     ] {
         if let Some(s) = scores {
+            let masks = |value: Option<f64>| truth_cell(any_masks, percent(value));
             out += &row(&[
                 label.to_owned(),
                 s.parameters.centre_radius.to_string(),
                 s.parameters.surround_radius.to_string(),
                 s.parameters.threshold.to_string(),
-                percent(s.mean_iou),
-                percent(s.instance_recall),
-                percent(s.success_rate),
-                percent(s.point_iou),
+                masks(s.mean_iou),
+                masks(s.instance_recall),
+                masks(s.success_rate),
+                masks(s.point_iou),
             ]);
         }
     }

@@ -150,10 +150,22 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         intra_threads: args.threads,
         ..RuntimeOptions::default()
     };
-    let mut models = Vec::new();
+    let mut models: Vec<LoadedModel> = Vec::new();
     for spec in &model_specs {
         let runtime = ModelRuntime::load(&spec.path, options.clone())
             .with_context(|| format!("cannot load model {}", spec.path.display()))?;
+        // A folder of variants may hold a copy of the model under test: evaluate it once.
+        let same = models
+            .iter()
+            .find(|m| m.runtime.model_id() == runtime.model_id());
+        if let (true, Some(same)) = (spec.from_folder, same) {
+            tracing::info!(
+                path = %spec.path.display(),
+                same_as = %same.label,
+                "skipped: the same file content as a model already loaded"
+            );
+            continue;
+        }
         let metadata = runtime.metadata();
         tracing::info!(
             model = %spec.label,

@@ -16,6 +16,9 @@ pub const DEFAULT_MODEL: &str = "models/evgate-S.onnx";
 pub struct ModelSpec {
     pub label: String,
     pub path: PathBuf,
+    /// Found in `--ablation-models` rather than named: skipped when its content repeats a
+    /// model already loaded.
+    pub from_folder: bool,
 }
 
 impl ModelSpec {
@@ -25,7 +28,11 @@ impl ModelSpec {
             || path.display().to_string(),
             |s| s.to_string_lossy().into_owned(),
         );
-        Self { label, path }
+        Self {
+            label,
+            path,
+            from_folder: false,
+        }
     }
 }
 
@@ -44,6 +51,7 @@ impl FromStr for ModelSpec {
                 Ok(Self {
                     label: label.to_owned(),
                     path: PathBuf::from(path),
+                    from_folder: false,
                 })
             }
             _ => Ok(Self::from_path(PathBuf::from(text))),
@@ -71,7 +79,13 @@ pub fn models_in(folder: &Path) -> anyhow::Result<Vec<ModelSpec>> {
         );
     }
     paths.sort();
-    Ok(paths.into_iter().map(ModelSpec::from_path).collect())
+    Ok(paths
+        .into_iter()
+        .map(|path| ModelSpec {
+            from_folder: true,
+            ..ModelSpec::from_path(path)
+        })
+        .collect())
 }
 
 /// The models of a run in order: the given ones (or the committed model when none is given and
@@ -156,10 +170,12 @@ mod tests {
         let given = [ModelSpec {
             label: "S".to_owned(),
             path: primary,
+            from_folder: false,
         }];
         let models = select_models(&given, Some(folder.path()), Path::new("absent.onnx")).unwrap();
         let labels: Vec<&str> = models.iter().map(|m| m.label.as_str()).collect();
         assert_eq!(labels, ["S", "evgate-S-atc-reference"]);
+        assert!(!models[0].from_folder && models[1].from_folder);
     }
 
     #[test]
