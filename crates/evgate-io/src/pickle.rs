@@ -46,7 +46,10 @@ pub fn read_pickle(bytes: &[u8]) -> Result<PyValue, PickleError> {
         memo: HashMap::new(),
     };
     let root = machine.run()?;
-    machine.to_value(root, 0)
+    // Shared references (memo) make a graph that is expanded into a tree: a budget stops a
+    // small hostile pickle from expanding exponentially.
+    let budget = std::cell::Cell::new(machine.nodes.len().saturating_mul(16).max(1 << 20));
+    machine.to_value(root, 0, &budget)
 }
 
 struct Machine<'a> {
@@ -377,14 +380,26 @@ impl Machine<'_> {
         }
     }
 
-    fn to_value(&self, index: usize, depth: usize) -> Result<PyValue, PickleError> {
+    fn to_value(
+        &self,
+        index: usize,
+        depth: usize,
+        budget: &std::cell::Cell<usize>,
+    ) -> Result<PyValue, PickleError> {
         if depth > MAX_DEPTH {
             return Err(self.fail(
                 self.pos,
                 format!("values nested deeper than {MAX_DEPTH} levels (or a cycle)"),
             ));
         }
-        let convert = |i: usize| self.to_value(i, depth + 1);
+        if budget.get() == 0 {
+            return Err(self.fail(
+                self.pos,
+                "shared references expand to too many values (more than 16 per pickled value)",
+            ));
+        }
+        budget.set(budget.get() - 1);
+        let convert = |i: usize| self.to_value(i, depth + 1, budget);
         Ok(match &self.nodes[index] {
             Node::Leaf(value) => value.clone(),
             Node::List(items) => PyValue::List(
@@ -493,6 +508,23 @@ mod tests {
         let value = read_pickle(&p).unwrap();
         let meta = value.find_dict_with_key("frames").unwrap();
         assert!(meta.get("meta").is_some());
+    }
+
+    #[test]
+    fn shared_references_cannot_expand_exponentially() {
+        // l0 = []; l1 = [l0, l0]; l2 = [l1, l1]; ... 100 levels: 2^100 leaves as a tree.
+        let mut p = vec![0x80, 3, b']', b'r', 0, 0, 0, 0];
+        for level in 1u32..=100 {
+            p.extend_from_slice(&[b']', b'(', b'j']);
+            p.extend_from_slice(&(level - 1).to_le_bytes());
+            p.push(b'j');
+            p.extend_from_slice(&(level - 1).to_le_bytes());
+            p.extend_from_slice(&[b'e', b'r']);
+            p.extend_from_slice(&level.to_le_bytes());
+        }
+        p.push(b'.');
+        let err = read_pickle(&p).unwrap_err().to_string();
+        assert!(err.contains("too many values"), "{err}");
     }
 
     #[test]

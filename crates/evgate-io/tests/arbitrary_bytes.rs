@@ -55,6 +55,12 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
     #[test]
+    fn random_bytes_never_panic_the_metadata_readers(bytes in prop::collection::vec(any::<u8>(), 0..512)) {
+        let _ = evgate_io::pickle::read_pickle(&bytes);
+        let _ = evgate_io::pyvalue::parse_literal(&String::from_utf8_lossy(&bytes));
+    }
+
+    #[test]
     fn random_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..2048), which in 0..6usize) {
         drain(bytes, FORMATS[which]);
     }
