@@ -515,11 +515,11 @@ mod tests {
         // l0 = []; l1 = [l0, l0]; l2 = [l1, l1]; ... 100 levels: 2^100 leaves as a tree.
         let mut p = vec![0x80, 3, b']', b'r', 0, 0, 0, 0];
         for level in 1u32..=100 {
-            p.extend_from_slice(&[b']', b'(', b'j']);
+            p.extend_from_slice(b"](j");
             p.extend_from_slice(&(level - 1).to_le_bytes());
             p.push(b'j');
             p.extend_from_slice(&(level - 1).to_le_bytes());
-            p.extend_from_slice(&[b'e', b'r']);
+            p.extend_from_slice(b"er");
             p.extend_from_slice(&level.to_le_bytes());
         }
         p.push(b'.');
