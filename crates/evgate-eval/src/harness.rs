@@ -950,6 +950,11 @@ mod tests {
         .unwrap();
         let report = run_recording(&recording);
         assert_eq!(report.sequences[0].ground_truth, GroundTruth::Masks);
+        let markdown = crate::markdown::render(&report, &[]);
+        assert!(
+            markdown.contains("the frame nearest to it within 5 ms"),
+            "{markdown}"
+        );
         assert_eq!(report.presets[0].preset, "box");
         let oracle = &report.overall["oracle"];
         // Frames (and reference times) at 0 and 30 ms past each 50 ms: t + 10 ms is 10 or 20 ms

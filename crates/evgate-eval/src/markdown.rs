@@ -112,6 +112,35 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
              so they measure forecasting alone.\n"
         );
     }
+    let count_of = |kind: GroundTruth| {
+        report
+            .sequences
+            .iter()
+            .filter(|s| s.ground_truth == kind)
+            .count()
+    };
+    let (camera_frames, events_only) = (
+        count_of(GroundTruth::Masks),
+        count_of(GroundTruth::EventsOnly),
+    );
+    if camera_frames > 0 {
+        let _ = writeln!(
+            out,
+            "{camera_frames} recording(s) with masks at camera frame times (EVIMO): the reference \
+             times are the frame times, the truth at t + Δt is the frame nearest to it within {} \
+             ms (other horizons are not scored there), and per-event scores are not available \
+             (no per-event labels).\n",
+            report.config.camera_frame_tolerance_ms
+        );
+    }
+    if events_only > 0 {
+        let _ = writeln!(
+            out,
+            "{events_only} recording(s) without ground truth (e.g. DSEC): only the kept share, \
+             event rates, runtime and prediction age are measured there; every score that needs \
+             masks reads \"{NO_MASKS}\" where no recording of a column has masks.\n"
+        );
+    }
     let _ = writeln!(out, "Methods:\n");
     for method in &report.methods {
         let _ = writeln!(out, "- `{}`: {}", method.name, method.description);
