@@ -2,7 +2,8 @@
 //! `[t seconds, x, y, p]`, streamed from inside the zip (the archive member is inflated on a
 //! helper thread in bounded blocks, so memory stays bounded). The sensor size comes from the
 //! shape (F, H, W) of the `mask` member when present. EVIMO's `events.txt` layout is read by
-//! the text decoder.
+//! the text decoder. The ground truth (masks, depth, frame times) of every EVIMO layout is read
+//! by [`crate::evimo_recording::EvimoRecording`].
 
 use std::fs::File;
 use std::io::{BufReader, Read};
