@@ -1,7 +1,8 @@
 //! Evaluation of motion-aware event suppression: metrics (IoU, mIoU, pIoU, SR@0.5, R@0.5,
 //! per-event precision / recall / F1), the baselines (OMS, no forecast, linear extrapolation,
-//! oracle), the harness that runs them and the model over labelled sequences, and the reports
-//! (JSON, Markdown tables, PNG plots).
+//! oracle), the harness that runs them and the models over recordings (the simulator's labelled
+//! sequences, EVIMO with masks at its frame times, events-only recordings such as DSEC), and
+//! the reports (JSON, Markdown tables including the ablation and model sizes, PNG plots).
 
 pub mod binned;
 pub mod components;
