@@ -11,6 +11,7 @@
 //! | `EVGATE_BENCH_THREADS` | 2 (intra-op threads) |
 //! | `EVGATE_BENCH_SPIN` | false (idle ONNX Runtime threads spin when true) |
 //! | `EVGATE_BENCH_PROVIDER` | cpu (cpu, cuda, auto) |
+//! | `EVGATE_BENCH_HORIZONS` | `MAX_HORIZONS` (8, the infer service's default): K, spread evenly up to the model's largest horizon |
 //! | `EVGATE_BENCH_WINDOWS` | 200 measured windows (after 20 warm-up windows) |
 //! | `EVGATE_BENCH_EVENTS` | 100000 events per 50 ms window |
 //! | `EVGATE_BENCH_JSON` | `target/bench-results/inference.json` |
@@ -84,7 +85,7 @@ struct InferenceReport {
     events_per_window: usize,
     horizons_ms: Vec<f32>,
     voxelisation: Stage,
-    /// ONNX Runtime call with every default horizon.
+    /// ONNX Runtime call with the `horizons_ms` (`EVGATE_BENCH_HORIZONS` of them).
     inference: Stage,
     /// Process CPU time (all threads) spent in that call: unlike wall time it barely moves when
     /// other processes compete for the cores, so it shows the work itself.
@@ -154,6 +155,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let threads: usize = setting("EVGATE_BENCH_THREADS", 2);
     let spin_threads: bool = setting("EVGATE_BENCH_SPIN", false);
     let provider: Provider = setting("EVGATE_BENCH_PROVIDER", Provider::Cpu);
+    let horizon_count: usize =
+        setting("EVGATE_BENCH_HORIZONS", MAX_HORIZONS).clamp(1, MAX_HORIZONS);
     let windows: usize = setting("EVGATE_BENCH_WINDOWS", 200).max(1);
     let events_per_window: usize = setting("EVGATE_BENCH_EVENTS", 100_000).max(1);
     let json_path: PathBuf = setting(
@@ -177,8 +180,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         input
     };
-    let horizons_ms: Vec<f32> = (1..=MAX_HORIZONS)
-        .map(|k| metadata.max_horizon_ms * k as f32 / MAX_HORIZONS as f32)
+    let horizons_ms: Vec<f32> = (1..=horizon_count)
+        .map(|k| metadata.max_horizon_ms * k as f32 / horizon_count as f32)
         .collect();
     let one_horizon = [metadata.max_horizon_ms];
 
