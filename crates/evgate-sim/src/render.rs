@@ -2,8 +2,10 @@
 //! ray–plane and ray–box intersection with a pinhole camera (so camera translation produces
 //! parallax and objects occlude by depth).
 
+use std::ops::Range;
+
 use crate::camera::project_world;
-use crate::linalg::{RigidTransform, Vec3};
+use crate::linalg::{Mat3, RigidTransform, Vec3};
 use crate::scene::{Scene, Shape};
 
 /// Log intensity of a ray that hits nothing (darker than any lit texel).
@@ -49,7 +51,6 @@ pub struct Snapshot<'a> {
     objects: Vec<PlacedObject>,
     panel_bounds: Vec<ScreenBounds>,
     panel_planes: Vec<PlanePlacement>,
-    all_panels: Vec<usize>,
     all_objects: Vec<usize>,
 }
 
@@ -58,12 +59,16 @@ struct PlanePlacement {
     normal: Vec3,
     offset: f32,
     log_illumination: f32,
+    /// `1 / texel-m`, once per panel rather than per pixel.
+    texels_per_m: f32,
 }
 
 struct PlacedObject {
     pose: RigidTransform,
-    inverse_rotation: crate::linalg::Mat3,
+    inverse_rotation: Mat3,
     bounds: ScreenBounds,
+    /// `1 / texel-m`, once per object rather than per pixel.
+    texels_per_m: f32,
 }
 
 #[derive(Clone, Copy)]
@@ -114,6 +119,75 @@ impl ScreenBounds {
     fn contains_column(&self, x: f32) -> bool {
         x >= self.x0 && x <= self.x1
     }
+
+    /// The columns `c` of a row `width` wide with `contains_column(c as f32)`: a contiguous
+    /// range because the test is monotonic in `c` (empty for NaN bounds).
+    fn columns(&self, width: usize) -> Range<usize> {
+        if self.x0.is_nan() || self.x1.is_nan() || self.x0 > self.x1 {
+            return 0..0;
+        }
+        let first = if self.x0 <= 0.0 {
+            0
+        } else {
+            (self.x0.ceil() as usize).min(width)
+        };
+        let end = if self.x1 >= width as f32 {
+            width
+        } else {
+            (self.x1.floor() as usize + 1).max(first)
+        };
+        first..end
+    }
+}
+
+/// Marks a pixel whose ray meets no panel.
+const NO_PANEL: u32 = u32::MAX;
+
+/// World-frame ray directions of one row, one array per component so that loops over columns
+/// vectorise.
+struct RowDirections {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+}
+
+struct DirectionSlice<'a> {
+    x: &'a [f32],
+    y: &'a [f32],
+    z: &'a [f32],
+}
+
+impl RowDirections {
+    fn new(width: usize) -> RowDirections {
+        RowDirections {
+            x: vec![0.0; width],
+            y: vec![0.0; width],
+            z: vec![0.0; width],
+        }
+    }
+
+    /// The directions `rotation · ray(column, row)` of a row, from the columns' `ray_x` and
+    /// the row's `ray_y` (as [`Snapshot::trace`] computes them).
+    fn fill(&mut self, rotation: &Mat3, ray_x: &[f32], ray_y: f32) {
+        for (c, &x) in ray_x.iter().enumerate() {
+            let direction = rotation.apply(Vec3::new(x, ray_y, 1.0));
+            self.x[c] = direction.x;
+            self.y[c] = direction.y;
+            self.z[c] = direction.z;
+        }
+    }
+
+    fn slice(&self, columns: Range<usize>) -> DirectionSlice<'_> {
+        DirectionSlice {
+            x: &self.x[columns.clone()],
+            y: &self.y[columns.clone()],
+            z: &self.z[columns],
+        }
+    }
+
+    fn at(&self, column: usize) -> Vec3 {
+        Vec3::new(self.x[column], self.y[column], self.z[column])
+    }
 }
 
 impl<'a> Snapshot<'a> {
@@ -130,6 +204,7 @@ impl<'a> Snapshot<'a> {
                     pose,
                     inverse_rotation: pose.rotation.transpose(),
                     bounds: ScreenBounds::of_points(scene, &camera, corners.into_iter()),
+                    texels_per_m: 1.0 / object.texel_m,
                 }
             })
             .collect();
@@ -154,6 +229,7 @@ impl<'a> Snapshot<'a> {
                     normal,
                     offset: normal.dot(panel.origin - camera.translation),
                     log_illumination: log_illumination(scene, normal),
+                    texels_per_m: 1.0 / panel.texel_m,
                 }
             })
             .collect();
@@ -161,7 +237,6 @@ impl<'a> Snapshot<'a> {
             scene,
             camera,
             panel_planes,
-            all_panels: (0..scene.panels.len()).collect(),
             all_objects: (0..scene.objects.len()).collect(),
             objects,
             panel_bounds,
@@ -178,6 +253,11 @@ impl<'a> Snapshot<'a> {
     }
 
     /// Renders rows `first_row..first_row + rows` into the given row-major slices.
+    ///
+    /// The panels are searched for a whole row at a time, panel after panel, in plain loops
+    /// over columns that the compiler vectorises (the division per panel and pixel dominated
+    /// the per-pixel search); every pixel still sees the same operations in the same order as
+    /// [`Snapshot::trace`], so the output is bit-identical to tracing pixel by pixel.
     pub fn render_rows(
         &self,
         first_row: usize,
@@ -187,20 +267,45 @@ impl<'a> Snapshot<'a> {
     ) {
         let width = self.scene.sensor.width as usize;
         let rows = log_intensity.len() / width;
-        let mut active_panels = Vec::with_capacity(self.panel_bounds.len());
+        let intrinsics = &self.scene.intrinsics;
+        let ray_x: Vec<f32> = (0..width)
+            .map(|column| intrinsics.ray(column as f32, 0.0).x)
+            .collect();
+        let mut directions = RowDirections::new(width);
+        let mut nearest_depth = vec![f32::INFINITY; width];
+        let mut nearest_panel = vec![NO_PANEL; width];
         let mut active_objects = Vec::with_capacity(self.objects.len());
         for row in 0..rows {
             let y = (first_row + row) as f32;
-            active_panels.clear();
-            active_panels.extend(
-                (0..self.panel_bounds.len()).filter(|&i| self.panel_bounds[i].contains_row(y)),
-            );
+            let ray_y = intrinsics.ray(0.0, y).y;
+            directions.fill(&self.camera.rotation, &ray_x, ray_y);
+            nearest_depth.fill(f32::INFINITY);
+            nearest_panel.fill(NO_PANEL);
+            for (i, bounds) in self.panel_bounds.iter().enumerate() {
+                if bounds.contains_row(y) {
+                    let columns = bounds.columns(width);
+                    self.nearest_on_panel(
+                        i,
+                        &directions.slice(columns.clone()),
+                        &mut nearest_depth[columns.clone()],
+                        &mut nearest_panel[columns],
+                    );
+                }
+            }
             active_objects.clear();
             active_objects.extend(
                 (0..self.objects.len()).filter(|&i| self.objects[i].bounds.contains_row(y)),
             );
             for column in 0..width {
-                let hit = self.trace_filtered(column as f32, y, &active_panels, &active_objects);
+                let panel =
+                    (nearest_panel[column] != NO_PANEL).then_some(nearest_panel[column] as usize);
+                let hit = self.complete_hit(
+                    column as f32,
+                    directions.at(column),
+                    nearest_depth[column],
+                    panel,
+                    &active_objects,
+                );
                 let i = row * width + column;
                 log_intensity[i] = hit.log_intensity;
                 surface[i] = hit.surface;
@@ -209,30 +314,63 @@ impl<'a> Snapshot<'a> {
         }
     }
 
-    /// What the ray through pixel centre (x, y) hits.
-    pub fn trace(&self, x: f32, y: f32) -> Hit {
-        self.trace_filtered(x, y, &self.all_panels, &self.all_objects)
+    /// Lowers `nearest_depth` (and records panel `i` in `nearest_panel`) where the rays in
+    /// `directions` meet panel `i` closer than anything found so far: the per-pixel test of
+    /// [`Snapshot::trace`], written without branches so that it vectorises.
+    fn nearest_on_panel(
+        &self,
+        i: usize,
+        directions: &DirectionSlice<'_>,
+        nearest_depth: &mut [f32],
+        nearest_panel: &mut [u32],
+    ) {
+        let plane = &self.panel_planes[i];
+        let panel = &self.scene.panels[i];
+        let origin = self.camera.translation;
+        let n = nearest_depth.len();
+        let (xs, ys, zs) = (&directions.x[..n], &directions.y[..n], &directions.z[..n]);
+        let nearest_panel = &mut nearest_panel[..n];
+        match panel.half_extent {
+            None => {
+                for c in 0..n {
+                    let direction = Vec3::new(xs[c], ys[c], zs[c]);
+                    let distance = plane.offset / plane.normal.dot(direction);
+                    let closer = (distance > 1e-3) & (distance < nearest_depth[c]);
+                    nearest_depth[c] = if closer { distance } else { nearest_depth[c] };
+                    nearest_panel[c] = if closer { i as u32 } else { nearest_panel[c] };
+                }
+            }
+            Some((hu, hv)) => {
+                for c in 0..n {
+                    let direction = Vec3::new(xs[c], ys[c], zs[c]);
+                    let distance = plane.offset / plane.normal.dot(direction);
+                    let relative = origin + direction * distance - panel.origin;
+                    // Non-short-circuit `&` and `|` keep the loop free of branches.
+                    let inside = !((relative.dot(panel.axis_u).abs() > hu)
+                        | (relative.dot(panel.axis_v).abs() > hv));
+                    let closer = (distance > 1e-3) & (distance < nearest_depth[c]) & inside;
+                    nearest_depth[c] = if closer { distance } else { nearest_depth[c] };
+                    nearest_panel[c] = if closer { i as u32 } else { nearest_panel[c] };
+                }
+            }
+        }
     }
 
-    fn trace_filtered(&self, x: f32, y: f32, panels: &[usize], objects: &[usize]) -> Hit {
+    /// What the ray through pixel centre (x, y) hits.
+    pub fn trace(&self, x: f32, y: f32) -> Hit {
         let scene = self.scene;
         let direction = self.camera.rotation.apply(scene.intrinsics.ray(x, y));
         let origin = self.camera.translation;
-        let mut best = Hit {
-            surface: 0,
-            point: Vec3::default(),
-            depth: f32::INFINITY,
-            log_intensity: LOG_DARK,
-        };
-        let mut best_panel = None;
-        for &i in panels {
+        let mut nearest_depth = f32::INFINITY;
+        let mut nearest_panel = None;
+        for i in 0..scene.panels.len() {
             if !self.panel_bounds[i].contains_column(x) {
                 continue;
             }
             let plane = &self.panel_planes[i];
             // Parallel rays give an infinite or NaN distance, which fails the comparison.
             let distance = plane.offset / plane.normal.dot(direction);
-            if !(distance > 1e-3 && distance < best.depth) {
+            if !(distance > 1e-3 && distance < nearest_depth) {
                 continue;
             }
             let panel = &scene.panels[i];
@@ -242,16 +380,44 @@ impl<'a> Snapshot<'a> {
                     continue;
                 }
             }
-            best.depth = distance;
-            best_panel = Some(i);
+            nearest_depth = distance;
+            nearest_panel = Some(i);
         }
-        let mut best_material = best_panel.map(|i| {
+        self.complete_hit(
+            x,
+            direction,
+            nearest_depth,
+            nearest_panel,
+            &self.all_objects,
+        )
+    }
+
+    /// Finishes a ray in `direction` through column `x` whose nearest static surface is
+    /// `panel` at `panel_depth`: tests the moving objects (those listed in `objects`) and
+    /// shades the nearest surface.
+    fn complete_hit(
+        &self,
+        x: f32,
+        direction: Vec3,
+        panel_depth: f32,
+        panel: Option<usize>,
+        objects: &[usize],
+    ) -> Hit {
+        let scene = self.scene;
+        let origin = self.camera.translation;
+        let mut best = Hit {
+            surface: 0,
+            point: Vec3::default(),
+            depth: panel_depth,
+            log_intensity: LOG_DARK,
+        };
+        let mut best_material = panel.map(|i| {
             let panel = &scene.panels[i];
             best.point = origin + direction * best.depth;
             let relative = best.point - panel.origin;
             Material {
                 texture: panel.texture,
-                texel_m: panel.texel_m,
+                texels_per_m: self.panel_planes[i].texels_per_m,
                 u: relative.dot(panel.axis_u),
                 v: relative.dot(panel.axis_v),
                 normal: self.panel_planes[i].normal,
@@ -281,7 +447,7 @@ impl<'a> Snapshot<'a> {
             let normal = placed.pose.rotation.apply(local_hit.normal);
             best_material = Some(Material {
                 texture: object.texture,
-                texel_m: object.texel_m,
+                texels_per_m: placed.texels_per_m,
                 u: local_hit.u,
                 v: local_hit.v,
                 normal,
@@ -299,11 +465,10 @@ impl<'a> Snapshot<'a> {
         let cos_incidence = (material.normal.dot(direction).abs() / direction.length()).max(0.05);
         let metres_per_pixel = depth / (scene.intrinsics.fx * cos_incidence);
         let texture = &scene.textures[material.texture];
-        let inv_texel = 1.0 / material.texel_m;
         let log_reflectance = texture.sample(
-            material.u * inv_texel,
-            material.v * inv_texel,
-            metres_per_pixel * inv_texel,
+            material.u * material.texels_per_m,
+            material.v * material.texels_per_m,
+            metres_per_pixel * material.texels_per_m,
         );
         log_reflectance + material.log_illumination
     }
@@ -317,7 +482,7 @@ fn log_illumination(scene: &Scene, normal: Vec3) -> f32 {
 
 struct Material {
     texture: usize,
-    texel_m: f32,
+    texels_per_m: f32,
     u: f32,
     v: f32,
     normal: Vec3,
@@ -410,6 +575,58 @@ fn intersect_cuboid(half: Vec3, origin: Vec3, direction: Vec3) -> Option<LocalHi
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::camera::Intrinsics;
+    use crate::preset::Preset;
+    use crate::world::build_scene;
+    use evgate_core::SensorSize;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn rendering_whole_rows_matches_tracing_each_pixel_bit_for_bit() {
+        for preset in [Preset::Boxes, Preset::Table, Preset::Driving] {
+            let mut config = preset.config();
+            let k = config.intrinsics;
+            config.sensor = SensorSize::new(config.sensor.width / 4, config.sensor.height / 4);
+            config.intrinsics = Intrinsics {
+                fx: k.fx / 4.0,
+                fy: k.fy / 4.0,
+                cx: k.cx / 4.0,
+                cy: k.cy / 4.0,
+            };
+            let scene = build_scene(&config, &mut ChaCha8Rng::seed_from_u64(4));
+            let (width, height) = (config.sensor.width as usize, config.sensor.height as usize);
+            for t_s in [0.0, 0.37, 1.3] {
+                let snapshot = Snapshot::new(&scene, t_s);
+                let mut frame = Frame::new(width * height);
+                snapshot.render_rows(
+                    0,
+                    &mut frame.log_intensity,
+                    &mut frame.surface,
+                    &mut frame.depth,
+                );
+                for y in 0..height {
+                    for x in 0..width {
+                        let hit = snapshot.trace(x as f32, y as f32);
+                        let i = y * width + x;
+                        assert_eq!(
+                            (
+                                frame.log_intensity[i].to_bits(),
+                                frame.surface[i],
+                                frame.depth[i].to_bits()
+                            ),
+                            (
+                                hit.log_intensity.to_bits(),
+                                hit.surface,
+                                hit.depth.to_bits()
+                            ),
+                            "{preset} at {t_s} s, pixel ({x}, {y})"
+                        );
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn cuboid_hit_from_the_front_reports_front_face() {

@@ -21,6 +21,9 @@ use crate::world::build_scene;
 
 /// Rendering probes image motion over this interval to choose the next step.
 const MOTION_PROBE_US: i64 = 1_000;
+/// Row bands per worker thread in a render step: several, so that the cost of expensive
+/// rows spreads over the workers.
+const BANDS_PER_THREAD: usize = 8;
 /// Spacing of the pixel grid whose static-world points are followed by the motion probe.
 const MOTION_PROBE_GRID_PX: usize = 16;
 
@@ -219,7 +222,7 @@ impl Simulator {
         let snapshot = Snapshot::new(&self.scene, t1 as f32 * 1e-6);
         let width = self.config.sensor.width as usize;
         let height = self.config.sensor.height as usize;
-        let rows_per_band = height.div_ceil(self.threads);
+        let rows_per_band = height.div_ceil(self.threads * BANDS_PER_THREAD);
         let refractory = self.config.events.refractory_us;
         let mut events = Vec::new();
         {
@@ -240,26 +243,38 @@ impl Simulator {
                     depth,
                     band,
                 });
+            // Bands are dealt out in turn, so every worker gets rows from the whole image
+            // (the cost per row varies: objects, near floors); events are then concatenated
+            // in band order, as one thread would produce them.
+            let mut per_worker: Vec<Vec<(usize, BandJob<'_>)>> =
+                (0..self.threads).map(|_| Vec::new()).collect();
+            for (i, job) in jobs.enumerate() {
+                per_worker[i % self.threads].push((i, job));
+            }
             let snapshot = &snapshot;
-            let band_events: Vec<Vec<LabelledEvent>> = if self.threads == 1 {
-                jobs.map(|job| job.run(snapshot, t0, t1, refractory))
-                    .collect()
-            } else {
-                std::thread::scope(|scope| {
-                    let handles: Vec<_> = jobs
-                        .map(|job| scope.spawn(move || job.run(snapshot, t0, t1, refractory)))
-                        .collect();
-                    handles
-                        .into_iter()
-                        .map(|handle| {
-                            handle
-                                .join()
-                                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
-                        })
-                        .collect()
-                })
+            let run_all = move |list: Vec<(usize, BandJob<'_>)>| {
+                list.into_iter()
+                    .map(|(i, job)| (i, job.run(snapshot, t0, t1, refractory)))
+                    .collect::<Vec<_>>()
             };
-            for mut band in band_events {
+            let mut band_events: Vec<(usize, Vec<LabelledEvent>)> = std::thread::scope(|scope| {
+                let mut lists = per_worker.into_iter();
+                let own = lists.next().unwrap_or_default();
+                let helpers: Vec<_> = lists
+                    .map(|list| scope.spawn(move || run_all(list)))
+                    .collect();
+                let mut done = run_all(own);
+                for helper in helpers {
+                    done.extend(
+                        helper
+                            .join()
+                            .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
+                    );
+                }
+                done
+            });
+            band_events.sort_unstable_by_key(|(i, _)| *i);
+            for (_, mut band) in band_events {
                 events.append(&mut band);
             }
         }

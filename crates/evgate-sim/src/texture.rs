@@ -49,7 +49,10 @@ struct Level {
 impl Level {
     fn at(&self, x: i32, y: i32) -> f32 {
         let mask = self.size as i32 - 1;
-        self.texels[(y & mask) as usize * self.size + (x & mask) as usize]
+        let index = (y & mask) as usize * self.size + (x & mask) as usize;
+        // `texels` holds size² (a power of two) values, so the index is already below that;
+        // masking it again lets the compiler drop the bounds check of this hot lookup.
+        self.texels[index & (self.texels.len() - 1)]
     }
 
     /// Bilinear sample at continuous texel coordinates, wrapping around the edges.
@@ -122,9 +125,11 @@ impl Texture {
             return self.levels[0].bilinear(u, v);
         }
         let level = approximate_log2(footprint).min((self.levels.len() - 1) as f32);
-        let fine = level.floor() as usize;
+        // `level` is positive here (footprint > 1): truncation is its floor, without a call.
+        let fine = level as usize;
         let blend = level - fine as f32;
-        let scale = 1.0 / (1u32 << fine) as f32;
+        // 2^-fine, built from its exponent bits: exact, as the division it replaces.
+        let scale = f32::from_bits((127 - fine as u32) << 23);
         let a = self.levels[fine].bilinear(u * scale, v * scale);
         if fine + 1 >= self.levels.len() || blend == 0.0 {
             return a;
