@@ -516,18 +516,16 @@ impl GtFrames {
                 consumed,
             } => {
                 let bytes = w * h * 2;
-                let mut frame = vec![0u8; bytes];
-                let mut depth_frame = depths.as_ref().map(|_| vec![0u8; bytes]);
+                let mut frame = Vec::new();
+                let mut depth_frame = depths.as_ref().map(|_| Vec::new());
                 while *consumed <= info.index {
-                    masks
-                        .read_exact(&mut frame)
-                        .map_err(|source| EvimoError::Io {
-                            path: self.path.join("mask"),
-                            action: "read a mask frame",
-                            source,
-                        })?;
+                    read_frame(masks, bytes, &mut frame).map_err(|source| EvimoError::Io {
+                        path: self.path.join("mask"),
+                        action: "read a mask frame",
+                        source,
+                    })?;
                     if let (Some(stream), Some(buffer)) = (depths.as_mut(), depth_frame.as_mut()) {
-                        stream.read_exact(buffer).map_err(|source| EvimoError::Io {
+                        read_frame(stream, bytes, buffer).map_err(|source| EvimoError::Io {
                             path: self.path.join("depth"),
                             action: "read a depth frame",
                             source,
@@ -576,6 +574,23 @@ impl Iterator for GtFrames {
     }
 }
 
+/// Reads the next `bytes` bytes of a frame stack into `frame`. The buffer grows with the data
+/// that arrives, so a header claiming huge frames cannot make us allocate for the claim.
+fn read_frame(stream: &mut MemberStream, bytes: usize, frame: &mut Vec<u8>) -> std::io::Result<()> {
+    frame.clear();
+    stream.take(bytes as u64).read_to_end(frame)?;
+    if frame.len() < bytes {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::UnexpectedEof,
+            format!(
+                "the stack ends {} bytes into a frame of {bytes} bytes",
+                frame.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// (mask, depth) raw channels of an EVIMO `depth_mask_*.png` (16-bit RGB or RGBA).
 fn read_depth_mask_png(path: &Path, size: SensorSize) -> Result<(Vec<u16>, Vec<u16>), EvimoError> {
     let fail = |problem: String| EvimoError::Frame {
@@ -592,6 +607,15 @@ fn read_depth_mask_png(path: &Path, size: SensorSize) -> Result<(Vec<u16>, Vec<u
     let mut reader = decoder
         .read_info()
         .map_err(|e| fail(format!("not a readable PNG: {e}")))?;
+    // The size is checked before the image buffer is allocated: a PNG header may claim any
+    // size.
+    let header = reader.info();
+    if (header.width, header.height) != (size.width as u32, size.height as u32) {
+        return Err(fail(format!(
+            "{}x{} pixels, the sensor is {}x{}",
+            header.width, header.height, size.width, size.height
+        )));
+    }
     let mut buffer = vec![0; reader.output_buffer_size()];
     let info = reader
         .next_frame(&mut buffer)
@@ -605,12 +629,6 @@ fn read_depth_mask_png(path: &Path, size: SensorSize) -> Result<(Vec<u16>, Vec<u
             )))
         }
     };
-    if (info.width, info.height) != (size.width as u32, size.height as u32) {
-        return Err(fail(format!(
-            "{}x{} pixels, the sensor is {}x{}",
-            info.width, info.height, size.width, size.height
-        )));
-    }
     let pixels = &buffer[..info.buffer_size()];
     let sample = |pixel: &[u8], channel: usize| {
         u16::from_be_bytes([pixel[2 * channel], pixel[2 * channel + 1]])
