@@ -1,6 +1,9 @@
 //! Gating throughput next to a plain copy of the same bytes: 1 M events of a 50 ms window
 //! against a mask covering about a fifth of a 346×260 sensor.
 
+mod cpu_time;
+
+use criterion::measurement::Measurement;
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use evgate_core::{keep_bitmap, partition, BitMask, Event, ForecastView, GateMode, SensorSize};
 use rand::{Rng, SeedableRng};
@@ -37,7 +40,9 @@ fn random_mask(rng: &mut ChaCha8Rng) -> BitMask {
     mask
 }
 
-fn gating(criterion: &mut Criterion) {
+/// Runs under wall time (`gate`) and under the thread's CPU time (`gate-cpu`), the latter for
+/// a figure that other jobs on the machine move less.
+fn gating<M: Measurement>(criterion: &mut Criterion<M>, group_name: &str) {
     let events = uniform_events();
     let mut rng = ChaCha8Rng::seed_from_u64(13);
     let mask = random_mask(&mut rng);
@@ -49,7 +54,7 @@ fn gating(criterion: &mut Criterion) {
         .expect("forecast is well formed");
     let mode = GateMode::KeepMovingObjects;
 
-    let mut group = criterion.benchmark_group("gate");
+    let mut group = criterion.benchmark_group(group_name);
     group.throughput(Throughput::Elements(EVENTS as u64));
     let mut copy = vec![Event::default(); EVENTS];
     group.bench_function("memcpy", |bencher| {
@@ -94,5 +99,18 @@ fn gating(criterion: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, gating);
-criterion_main!(benches);
+fn wall_time(criterion: &mut Criterion) {
+    gating(criterion, "gate");
+}
+
+fn cpu_time(criterion: &mut Criterion<cpu_time::ThreadCpuTime>) {
+    gating(criterion, "gate-cpu");
+}
+
+criterion_group!(wall, wall_time);
+criterion_group!(
+    name = cpu;
+    config = Criterion::default().with_measurement(cpu_time::ThreadCpuTime);
+    targets = cpu_time
+);
+criterion_main!(wall, cpu);

@@ -115,14 +115,44 @@ pub fn partition(
     let lookup = MaskLookup::new(mask);
     let inversion = mode.inversion();
     let mut outputs = Outputs::new([kept, suppressed], events.len());
-    for event in events {
+    outputs.route(events, move |event| {
         let (_, bit) = lookup.probe(event);
-        let keep = bit ^ inversion;
-        // Branch-free routing: write to both and advance only the chosen cursor.
-        outputs.push_among(event, [keep as usize, (1 - keep) as usize]);
-    }
+        Some(bit ^ inversion)
+    });
     let [kept_count, _] = outputs.finish();
     kept_count
+}
+
+/// The partition's inner loop, apart so that its cursors stay in registers: routes events while
+/// `route_of` judges them (see `Outputs::route`) and returns how many it routed and the new
+/// kept and suppressed cursors.
+///
+/// # Safety
+/// `bases[k]` must be valid for writes of `cursors[k] + run.len()` events.
+#[inline(never)]
+unsafe fn route_while_judged(
+    run: &[Event],
+    bases: [*mut Event; 2],
+    cursors: [usize; 2],
+    route_of: impl Fn(&Event) -> Option<u64>,
+) -> (usize, [usize; 2]) {
+    let [kept_base, suppressed_base] = bases;
+    let [mut kept, mut suppressed] = cursors;
+    for (index, event) in run.iter().enumerate() {
+        let Some(keep) = route_of(event) else {
+            return (index, [kept, suppressed]);
+        };
+        // Branch-free: write at both cursors and advance only the chosen one. Both cursors
+        // grow by at most one per routed event, so they stay within the caller's bound.
+        // SAFETY: see the function's contract.
+        unsafe {
+            kept_base.add(kept).write(*event);
+            suppressed_base.add(suppressed).write(*event);
+        }
+        kept += keep as usize;
+        suppressed += 1 - keep as usize;
+    }
+    (run.len(), [kept, suppressed])
 }
 
 /// Writes one keep bit per event into `keep` (bit i of word i / 64 for event i; the rest of the
@@ -164,8 +194,8 @@ fn check_bitmap(words: &[u64], events: usize) -> Result<(), GateError> {
 /// Position of the unjudged vector among a forecast partition's outputs.
 const UNJUDGED: usize = 2;
 
-/// `N` output vectors filled without branches: every event is written at every cursor and only
-/// the chosen cursors advance.
+/// The output vectors of a partition (kept, suppressed and, for a forecast, unjudged), filled
+/// without a branch per event.
 struct Outputs<'a, const N: usize> {
     vectors: [&'a mut Vec<Event>; N],
     written: [usize; N],
@@ -180,19 +210,27 @@ impl<'a, const N: usize> Outputs<'a, N> {
         Self { vectors, written }
     }
 
-    /// Writes `event` at the cursors of the first `M` vectors and advances those whose `advance`
-    /// is 1; at most one may be 1, and at most as many events as were announced to `new` may be
-    /// pushed in all.
+    /// Routes every event of `run`: `Some(keep)` (keep is 0 or 1) sends it to the kept
+    /// (first) or the suppressed (second) vector, `None` to the unjudged vector (the third; a
+    /// two-vector `Outputs` must never get `None`). At most as many events as were announced to
+    /// `new` may be routed in all.
     #[inline(always)]
-    fn push_among<const M: usize>(&mut self, event: &Event, advance: [usize; M]) {
-        debug_assert!(M <= N && advance.iter().sum::<usize>() <= 1);
-        for ((vector, written), step) in self.vectors.iter_mut().zip(&mut self.written).zip(advance)
-        {
-            debug_assert!(*written < vector.capacity());
-            // SAFETY: `new` reserved one slot per announced event beyond the initial length and
-            // each push advances at most one cursor, so `written` < capacity.
-            unsafe { vector.as_mut_ptr().add(*written).write(*event) };
-            *written += step;
+    fn route(&mut self, run: &[Event], route_of: impl Fn(&Event) -> Option<u64> + Copy) {
+        let bases = [self.vectors[0].as_mut_ptr(), self.vectors[1].as_mut_ptr()];
+        let capacities = [self.vectors[0].capacity(), self.vectors[1].capacity()];
+        let mut rest = run;
+        loop {
+            let cursors = [self.written[0], self.written[1]];
+            // SAFETY: `new` reserved one slot per announced event beyond each initial length,
+            // so every cursor plus the events still to route stays within capacity.
+            debug_assert!((0..2).all(|k| cursors[k] + rest.len() <= capacities[k]));
+            let (routed, cursors) = unsafe { route_while_judged(rest, bases, cursors, route_of) };
+            [self.written[0], self.written[1]] = cursors;
+            let Some((unjudged, after)) = rest[routed..].split_first() else {
+                return;
+            };
+            self.push_all_into(UNJUDGED, std::slice::from_ref(unjudged));
+            rest = after;
         }
     }
 
@@ -200,7 +238,7 @@ impl<'a, const N: usize> Outputs<'a, N> {
     fn push_all_into(&mut self, index: usize, events: &[Event]) {
         let (vector, written) = (&mut self.vectors[index], &mut self.written[index]);
         debug_assert!(*written + events.len() <= vector.capacity());
-        // SAFETY: as in `push_among`: the slots were reserved by `new`, and the source is a
+        // SAFETY: as in `route`: the slots were reserved by `new`, and the source is a
         // caller's slice, which cannot overlap the vector's spare capacity.
         unsafe {
             std::ptr::copy_nonoverlapping(
@@ -443,18 +481,13 @@ impl<'a> ForecastView<'a> {
             };
             let lookup = MaskLookup::new(self.mask(index).expect("run index is a horizon"));
             let (first, last) = self.interval(index);
-            for event in run {
+            outputs.route(run, move |event| {
                 let (inside, bit) = lookup.probe(event);
                 let judged = inside & u64::from((event.t >= first) & (event.t <= last));
                 // Off-sensor and out-of-order events are rare, so this branch is predicted and
                 // the common path writes two cursors instead of three.
-                if judged == 0 {
-                    outputs.push_all_into(UNJUDGED, std::slice::from_ref(event));
-                    continue;
-                }
-                let keep = bit ^ inversion;
-                outputs.push_among(event, [keep as usize, (1 - keep) as usize]);
-            }
+                (judged != 0).then_some(bit ^ inversion)
+            });
         });
         let [kept, suppressed, unjudged] = outputs.finish();
         GateCounts {

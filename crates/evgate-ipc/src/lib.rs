@@ -20,6 +20,7 @@ pub mod names;
 pub mod node;
 pub mod ports;
 pub mod qos;
+pub mod slice_writer;
 pub mod stats;
 
 pub use batch::{BatchFlags, BatchHeader};
@@ -28,8 +29,10 @@ pub use names::{NameError, PipelineNames, Stream};
 pub use node::{create_node, NodeError};
 pub use ports::{
     Delivery, LatestPublisher, LatestSubscriber, PortError, SlicePublisher, SliceSubscriber,
+    WrittenDelivery,
 };
 pub use qos::{Overflow, Qos};
+pub use slice_writer::SliceWriter;
 pub use stats::PipelineStats;
 
 /// The iceoryx2 service flavour every evgate process uses: inter-process shared memory.

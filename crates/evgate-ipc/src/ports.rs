@@ -2,6 +2,7 @@
 //! same name that wakes readers up.
 
 use std::fmt::Debug;
+use std::mem::MaybeUninit;
 use std::time::Duration;
 
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
@@ -13,11 +14,13 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::{AllocationStrategy, Node, ServiceName, ZeroCopySend};
 use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use iceoryx2::service::port_factory::PortFactory as _;
 
 use crate::names::{NameError, PipelineNames, Stream};
 use crate::qos::{Overflow, Qos, ServiceLimits};
+use crate::slice_writer::SliceWriter;
 use crate::Service;
 
 /// Port failures; every variant names the service.
@@ -62,6 +65,16 @@ pub struct Delivery {
     /// the overflow policy). A subscriber connecting or leaving during the send may make this
     /// one off.
     pub undelivered: usize,
+}
+
+/// How a [`SlicePublisher::publish_written`] went.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WrittenDelivery {
+    pub delivery: Delivery,
+    /// Items the fill wrote; the slots after them were zeroed.
+    pub written: usize,
+    /// Items the fill offered beyond the slice's length, not published.
+    pub overflowed: usize,
 }
 
 /// Streams readers want the newest sample of (forecasts, stats): the publisher overwrites the
@@ -223,27 +236,46 @@ where
         self.service.dynamic_config().number_of_subscribers()
     }
 
-    /// Publishes a copy of `items`.
+    /// Publishes a copy of `items` (one memcpy into shared memory).
     pub fn publish(&self, header: H, items: &[T]) -> Result<Delivery, PortError> {
-        self.publish_iter(header, items.iter().copied())
+        let sample = self.loan(header, items.len())?;
+        self.send(sample.write_from_slice(items))
     }
 
-    /// Writes the items of `items` straight into shared memory and publishes them.
-    pub fn publish_iter<I>(&self, header: H, items: I) -> Result<Delivery, PortError>
-    where
-        I: ExactSizeIterator<Item = T>,
-    {
-        let len = items.len();
-        let mut items = items;
+    /// Publishes `len` elements that `fill` writes in place, front to back, through a
+    /// [`SliceWriter`]; slots it leaves unwritten are zeroed.
+    pub fn publish_written(
+        &self,
+        header: H,
+        len: usize,
+        fill: impl FnOnce(&mut SliceWriter<'_, T>),
+    ) -> Result<WrittenDelivery, PortError> {
+        let mut sample = self.loan(header, len)?;
+        let mut writer = SliceWriter::new(sample.payload_mut());
+        fill(&mut writer);
+        let (written, overflowed) = (writer.written(), writer.overflowed());
+        writer.fill_rest(T::zeroed());
+        // SAFETY: `fill_rest` initialised every slot the fill left unwritten, and the writer
+        // only initialises slots, so the whole payload is initialised.
+        let sample = unsafe { sample.assume_init() };
+        Ok(WrittenDelivery {
+            delivery: self.send(sample)?,
+            written,
+            overflowed,
+        })
+    }
+
+    fn loan(
+        &self,
+        header: H,
+        len: usize,
+    ) -> Result<SampleMutUninit<Service, [MaybeUninit<T>], H>, PortError> {
         let mut sample = self
             .publisher
             .loan_slice_uninit(len)
             .map_err(|error| self.loan_error(len, error))?;
         *sample.user_header_mut() = header;
-        // An iterator that under-reports its length leaves zeroed elements instead of
-        // uninitialised memory.
-        let sample = sample.write_from_fn(|_| items.next().unwrap_or_else(T::zeroed));
-        self.send(sample)
+        Ok(sample)
     }
 
     /// Publishes `len` elements that `fill` writes into zero-initialised shared memory.
@@ -253,11 +285,7 @@ where
         len: usize,
         fill: impl FnOnce(&mut [T]),
     ) -> Result<Delivery, PortError> {
-        let mut sample = self
-            .publisher
-            .loan_slice_uninit(len)
-            .map_err(|error| self.loan_error(len, error))?;
-        *sample.user_header_mut() = header;
+        let sample = self.loan(header, len)?;
         let mut sample = sample.write_from_fn(|_| T::zeroed());
         fill(sample.payload_mut());
         self.send(sample)

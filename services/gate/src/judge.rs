@@ -3,6 +3,7 @@
 
 use evgate_core::{Event, GateMode, MaskView};
 use evgate_ipc::batch::bitmap_words;
+use evgate_ipc::SliceWriter;
 
 use crate::forecast_store::StoredForecast;
 use crate::policy::{NoForecast, Policy};
@@ -109,52 +110,32 @@ impl Judge {
         verdict
     }
 
-    /// Events whose pass bit equals `passed`, in order, as an exact-size iterator.
-    pub fn select<'a>(&'a self, events: &'a [Event], passed: bool, count: u64) -> Selected<'a> {
-        Selected {
-            events,
-            pass: &self.pass,
-            passed,
-            next: 0,
-            remaining: count as usize,
-        }
-    }
-}
-
-/// Iterator over the events of one verdict (kept or suppressed), written straight into the
-/// output sample.
-pub struct Selected<'a> {
-    events: &'a [Event],
-    pass: &'a [u64],
-    passed: bool,
-    next: usize,
-    remaining: usize,
-}
-
-impl Iterator for Selected<'_> {
-    type Item = Event;
-
-    fn next(&mut self) -> Option<Event> {
-        if self.remaining == 0 {
-            return None;
-        }
-        while self.next < self.events.len() {
-            let index = self.next;
-            self.next += 1;
-            if bit(self.pass, index) == self.passed {
-                self.remaining -= 1;
-                return Some(self.events[index]);
+    /// Writes the events whose pass bit equals `passed` to `writer`, in order. Whole words of
+    /// selected events go in one copy; elsewhere each set bit is found with a trailing-zero
+    /// count, so the work follows the selected events, not a branch per event.
+    pub fn write_selected(
+        &self,
+        events: &[Event],
+        passed: bool,
+        writer: &mut SliceWriter<'_, Event>,
+    ) {
+        let flip = if passed { 0 } else { u64::MAX };
+        for (chunk, &word) in events.chunks(64).zip(&self.pass) {
+            // Bits past the last event of a partial chunk are clear in `pass` and must stay
+            // clear after the flip.
+            let valid = u64::MAX >> (64 - chunk.len());
+            let mut selected = (word ^ flip) & valid;
+            if selected == valid {
+                writer.extend_from_slice(chunk);
+                continue;
+            }
+            while selected != 0 {
+                writer.push(chunk[selected.trailing_zeros() as usize]);
+                selected &= selected - 1;
             }
         }
-        None
-    }
-
-    fn size_hint(&self) -> (usize, Option<usize>) {
-        (self.remaining, Some(self.remaining))
     }
 }
-
-impl ExactSizeIterator for Selected<'_> {}
 
 #[cfg(test)]
 mod tests {
@@ -188,6 +169,14 @@ mod tests {
         StoredForecast::copy_from(&header, &words).unwrap()
     }
 
+    fn selected(judge: &Judge, events: &[Event], passed: bool) -> Vec<Event> {
+        let mut slots = vec![std::mem::MaybeUninit::uninit(); events.len()];
+        let mut writer = SliceWriter::new(&mut slots);
+        judge.write_selected(events, passed, &mut writer);
+        assert_eq!(writer.overflowed(), 0);
+        writer.as_written().to_vec()
+    }
+
     fn policy(no_forecast: NoForecast) -> Policy {
         Policy {
             no_forecast,
@@ -216,8 +205,11 @@ mod tests {
             (verdict.kept, verdict.suppressed, verdict.unjudged_dropped),
             (2, 1, 2)
         );
-        let kept: Vec<Event> = judge.select(&events, true, verdict.passed()).collect();
-        assert_eq!(kept, vec![events[0], events[2]]);
+        assert_eq!(selected(&judge, &events, true), vec![events[0], events[2]]);
+        assert_eq!(
+            selected(&judge, &events, false),
+            vec![events[1], events[3], events[4]]
+        );
 
         let verdict = judge.judge(
             &events,
@@ -242,7 +234,7 @@ mod tests {
     proptest! {
         #[test]
         fn every_event_gets_exactly_one_fate(
-            raw in proptest::collection::vec((990_000i64..1_200_000, 0u16..10, 0u16..5), 0..300),
+            raw in proptest::collection::vec((990_000i64..1_200_000, 0u16..10, 0u16..5), 0..600),
             policy_index in 0usize..3,
             ego in any::<bool>(),
             with_forecast in any::<bool>(),
@@ -256,10 +248,16 @@ mod tests {
             let verdict = judge.judge(&events, with_forecast.then_some(&forecast), mode, policy(no_forecast));
             let total = verdict.kept + verdict.suppressed + verdict.unjudged_passed + verdict.unjudged_dropped;
             prop_assert_eq!(total, events.len() as u64);
-            let kept: Vec<Event> = judge.select(&events, true, verdict.passed()).collect();
-            let suppressed: Vec<Event> = judge.select(&events, false, events.len() as u64 - verdict.passed()).collect();
+            let kept = selected(&judge, &events, true);
+            let suppressed = selected(&judge, &events, false);
             prop_assert_eq!(kept.len() as u64, verdict.passed());
             prop_assert_eq!(kept.len() + suppressed.len(), events.len());
+            // Both outputs keep the input order and follow the pass bits.
+            let bit_of = |index: usize| judge.pass[index / 64] >> (index % 64) & 1 == 1;
+            let expected_kept: Vec<Event> = (0..events.len()).filter(|&i| bit_of(i)).map(|i| events[i]).collect();
+            let expected_suppressed: Vec<Event> = (0..events.len()).filter(|&i| !bit_of(i)).map(|i| events[i]).collect();
+            prop_assert_eq!(kept, expected_kept);
+            prop_assert_eq!(suppressed, expected_suppressed);
         }
     }
 }

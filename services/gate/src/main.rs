@@ -341,14 +341,26 @@ impl Gate {
             out_header.flags |= BatchFlags::GAP_DETECTED;
         }
         let mut undelivered = 0;
-        if let Some(kept) = &self.kept {
-            let selected = self.judge.select(events, true, verdict.passed());
-            undelivered += kept.publish_iter(out_header, selected)?.undelivered;
-        }
-        if let Some(suppressed) = &self.suppressed {
-            let count = events.len() as u64 - verdict.passed();
-            let selected = self.judge.select(events, false, count);
-            undelivered += suppressed.publish_iter(out_header, selected)?.undelivered;
+        let passed = verdict.passed() as usize;
+        for (output, passes, count) in [
+            (&self.kept, true, passed),
+            (&self.suppressed, false, events.len() - passed),
+        ] {
+            let Some(output) = output else { continue };
+            let outcome = output.publish_written(out_header, count, |writer| {
+                self.judge.write_selected(events, passes, writer)
+            })?;
+            // The count comes from the same pass bits the selection reads, so a mismatch is a
+            // bug; it must not pass as silently zeroed or lost events.
+            anyhow::ensure!(
+                outcome.written == count && outcome.overflowed == 0,
+                "gating selected {} events (and {} more that did not fit) for {} where the \
+                 verdict counted {count}",
+                outcome.written,
+                outcome.overflowed,
+                output.service_name(),
+            );
+            undelivered += outcome.delivery.undelivered;
         }
         if let Some(keep_bitmap) = &self.keep_bitmap {
             undelivered += keep_bitmap
