@@ -11,8 +11,9 @@ use evgate_core::{Event, SensorSize};
 
 use crate::error::DecodeError;
 use crate::flatbuffer::Table;
-use crate::report::{Admission, DecodeReport};
+use crate::format::Format;
 use crate::source::ByteSource;
+use crate::stream_decoder::{ChunkFormat, DecoderInput, StreamDecoder};
 
 pub const MAGIC: &[u8; 14] = b"#!AER-DAT4.0\r\n";
 /// A packet larger than this is taken for corruption rather than allocated.
@@ -28,15 +29,17 @@ enum Compression {
     Zstd,
 }
 
-pub struct Aedat4Decoder {
-    source: ByteSource,
-    admission: Admission,
+/// What the header says about the packets that follow, and the buffer they are decompressed
+/// into.
+pub struct Aedat4Packets {
     compression: Compression,
     event_stream: i32,
     /// Where the data table starts (packets end there); `None` when not finalised.
     data_end: Option<u64>,
     packet: Vec<u8>,
 }
+
+pub type Aedat4Decoder = StreamDecoder<Aedat4Packets>;
 
 impl Aedat4Decoder {
     /// Reads the magic and header; `source` must be at the start of the file. `sensor_size`
@@ -98,68 +101,66 @@ impl Aedat4Decoder {
                 format!("event stream {event_stream} has no sizeX/sizeY; pass the sensor size"),
             )
         })?;
-        Ok(Self {
+        Ok(Self::from_parts(
             source,
-            admission: Admission::new(sensor_size),
-            compression,
-            event_stream,
-            data_end: u64::try_from(data_table).ok().filter(|&p| p > 0),
-            packet: Vec::new(),
-        })
+            sensor_size,
+            Aedat4Packets {
+                compression,
+                event_stream,
+                data_end: u64::try_from(data_table).ok().filter(|&p| p > 0),
+                packet: Vec::new(),
+            },
+        ))
     }
+}
 
-    pub fn sensor_size(&self) -> SensorSize {
-        self.admission.sensor_size()
-    }
+impl ChunkFormat for Aedat4Packets {
+    const FORMAT: Format = Format::Aedat4;
 
-    pub fn report(&self) -> &DecodeReport {
-        &self.admission.report
-    }
-
-    pub fn bytes_read(&self) -> u64 {
-        self.source.offset()
-    }
-
-    /// Clears `out` and fills it with the events of the next event packet; 0 means end.
-    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
-        out.clear();
+    /// Fills `out` with the events of the next event packet.
+    fn decode_chunk(
+        &mut self,
+        input: &mut DecoderInput,
+        out: &mut Vec<Event>,
+    ) -> Result<(), DecodeError> {
         while out.is_empty() {
-            if self.data_end.is_some_and(|end| self.source.offset() >= end)
-                || self.source.peek()?.is_none()
+            if self
+                .data_end
+                .is_some_and(|end| input.source.offset() >= end)
+                || input.source.peek()?.is_none()
             {
                 break;
             }
-            let packet_offset = self.source.offset();
-            let head = self.source.read_exact(8, "an AEDAT 4 packet header")?;
+            let packet_offset = input.source.offset();
+            let head = input.source.read_exact(8, "an AEDAT 4 packet header")?;
             let stream = i32::from_le_bytes(head[..4].try_into().expect("4 bytes"));
             let size = i32::from_le_bytes(head[4..].try_into().expect("4 bytes"));
             let size = usize::try_from(size)
                 .ok()
                 .filter(|&s| s <= MAX_PACKET_BYTES)
                 .ok_or_else(|| {
-                    self.malformed(packet_offset + 4, format!("packet size {size} is invalid"))
+                    input.malformed(packet_offset + 4, format!("packet size {size} is invalid"))
                 })?;
-            let body_offset = self.source.offset();
-            let body = self.source.read_exact(size, "an AEDAT 4 packet")?;
+            let body_offset = input.source.offset();
+            let body = input.source.read_exact(size, "an AEDAT 4 packet")?;
             if stream != self.event_stream {
                 continue;
             }
             let body = body.to_vec();
-            self.decompress(&body, body_offset)?;
-            self.decode_packet(out, body_offset)?;
+            self.decompress(input, &body, body_offset)?;
+            self.decode_packet(input, out, body_offset)?;
         }
-        Ok(out.len())
+        Ok(())
     }
+}
 
-    fn malformed(&self, offset: u64, problem: String) -> DecodeError {
-        DecodeError::Malformed {
-            path: self.source.path().to_path_buf(),
-            offset,
-            problem,
-        }
-    }
-
-    fn decompress(&mut self, body: &[u8], offset: u64) -> Result<(), DecodeError> {
+impl Aedat4Packets {
+    fn decompress(
+        &mut self,
+        input: &DecoderInput,
+        body: &[u8],
+        offset: u64,
+    ) -> Result<(), DecodeError> {
         self.packet.clear();
         let result = match self.compression {
             Compression::None => {
@@ -173,7 +174,7 @@ impl Aedat4Decoder {
                 .and_then(|d| d.take(MAX_DECOMPRESSED_BYTES).read_to_end(&mut self.packet)),
         };
         result.map(|_| ()).map_err(|e| {
-            self.malformed(
+            input.malformed(
                 offset,
                 format!(
                     "event packet does not decompress ({:?}): {e}",
@@ -183,7 +184,12 @@ impl Aedat4Decoder {
         })
     }
 
-    fn decode_packet(&mut self, out: &mut Vec<Event>, offset: u64) -> Result<(), DecodeError> {
+    fn decode_packet(
+        &mut self,
+        input: &mut DecoderInput,
+        out: &mut Vec<Event>,
+        offset: u64,
+    ) -> Result<(), DecodeError> {
         let packet = std::mem::take(&mut self.packet);
         let decoded = (|| {
             // Size-prefixed: the FlatBuffer proper starts after its 32-bit length.
@@ -192,7 +198,7 @@ impl Aedat4Decoder {
             table.struct_vector(0, EVENT_BYTES)
         })();
         let elements = decoded
-            .map_err(|e| self.malformed(offset, format!("event packet (decompressed) {e}")))?;
+            .map_err(|e| input.malformed(offset, format!("event packet (decompressed) {e}")))?;
         for record in elements.unwrap_or_default().chunks_exact(EVENT_BYTES) {
             let event = Event::new(
                 i64::from_le_bytes(record[..8].try_into().expect("8 bytes")),
@@ -201,7 +207,7 @@ impl Aedat4Decoder {
                 record[12] != 0,
             );
             // Packets are decompressed whole, so the best offset is the packet's.
-            self.admission.admit(out, event, offset);
+            input.admission.admit(out, event, offset);
         }
         self.packet = packet;
         Ok(())

@@ -9,11 +9,14 @@
 //! - Polarity: `1` = ON; `0` or `-1` = OFF.
 //! - Anything else is an error naming the line, its byte offset and the field.
 
+use std::path::Path;
+
 use evgate_core::{Event, SensorSize};
 
 use crate::error::DecodeError;
-use crate::report::{Admission, DecodeReport};
+use crate::format::Format;
 use crate::source::ByteSource;
+use crate::stream_decoder::{ChunkFormat, DecoderInput, StreamDecoder};
 
 /// Events per chunk.
 const CHUNK_EVENTS: usize = 64 * 1024;
@@ -25,9 +28,9 @@ enum TimeUnit {
     Seconds,
 }
 
-pub struct CsvDecoder {
-    source: ByteSource,
-    admission: Admission,
+/// What a text stream carries from line to line: the time unit, the line number, whether a
+/// header line may still come.
+pub struct CsvLines {
     unit: Option<TimeUnit>,
     line_number: u64,
     header_allowed: bool,
@@ -35,49 +38,55 @@ pub struct CsvDecoder {
     line: Vec<u8>,
 }
 
+pub type CsvDecoder = StreamDecoder<CsvLines>;
+
 impl CsvDecoder {
     /// Text files carry no sensor size: the caller gives it (events outside are dropped and
     /// counted).
     pub fn new(source: ByteSource, sensor_size: SensorSize) -> Self {
-        Self {
+        Self::from_parts(
             source,
-            admission: Admission::new(sensor_size),
-            unit: None,
-            line_number: 0,
-            header_allowed: true,
-            line: Vec::new(),
-        }
+            sensor_size,
+            CsvLines {
+                unit: None,
+                line_number: 0,
+                header_allowed: true,
+                line: Vec::new(),
+            },
+        )
     }
+}
 
-    pub fn sensor_size(&self) -> SensorSize {
-        self.admission.sensor_size()
-    }
+impl ChunkFormat for CsvLines {
+    const FORMAT: Format = Format::Csv;
 
-    pub fn report(&self) -> &DecodeReport {
-        &self.admission.report
-    }
-
-    pub fn bytes_read(&self) -> u64 {
-        self.source.offset()
-    }
-
-    /// Clears `out` and fills it with up to 65 536 events; 0 means end of stream.
-    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
-        out.clear();
+    /// Fills `out` with up to 65 536 events.
+    fn decode_chunk(
+        &mut self,
+        input: &mut DecoderInput,
+        out: &mut Vec<Event>,
+    ) -> Result<(), DecodeError> {
         let mut line = std::mem::take(&mut self.line);
-        let result = self.fill(out, &mut line);
+        let result = self.fill(input, out, &mut line);
         self.line = line;
         result
     }
+}
 
-    fn fill(&mut self, out: &mut Vec<Event>, line: &mut Vec<u8>) -> Result<usize, DecodeError> {
+impl CsvLines {
+    fn fill(
+        &mut self,
+        input: &mut DecoderInput,
+        out: &mut Vec<Event>,
+        line: &mut Vec<u8>,
+    ) -> Result<(), DecodeError> {
         while out.len() < CHUNK_EVENTS {
-            let Some(offset) = self.source.read_line(MAX_LINE, line)? else {
+            let Some(offset) = input.source.read_line(MAX_LINE, line)? else {
                 break;
             };
             self.line_number += 1;
             let text = std::str::from_utf8(line)
-                .map_err(|_| self.error(offset, "is not UTF-8 text".into()))?;
+                .map_err(|_| self.error(input.source.path(), offset, "is not UTF-8 text".into()))?;
             let text = text.trim();
             if text.is_empty() || text.starts_with('#') {
                 continue;
@@ -99,15 +108,15 @@ impl CsvDecoder {
                     continue;
                 }
             }
-            let event = self.parse(offset, &fields, count)?;
-            self.admission.admit(out, event, offset);
+            let event = self.parse(input.source.path(), offset, &fields, count)?;
+            input.admission.admit(out, event, offset);
         }
-        Ok(out.len())
+        Ok(())
     }
 
-    fn error(&self, offset: u64, problem: String) -> DecodeError {
+    fn error(&self, path: &Path, offset: u64, problem: String) -> DecodeError {
         DecodeError::Malformed {
-            path: self.source.path().to_path_buf(),
+            path: path.to_path_buf(),
             offset,
             problem: format!("line {} {problem}", self.line_number),
         }
@@ -115,12 +124,17 @@ impl CsvDecoder {
 
     fn parse(
         &mut self,
+        path: &Path,
         offset: u64,
         fields: &[&str; 4],
         count: usize,
     ) -> Result<Event, DecodeError> {
         if count != 4 {
-            return Err(self.error(offset, format!("has {count} fields, expected 4 (t x y p)")));
+            return Err(self.error(
+                path,
+                offset,
+                format!("has {count} fields, expected 4 (t x y p)"),
+            ));
         }
         let looks_fractional = fields[0].contains(['.', 'e', 'E']);
         let unit = *self.unit.get_or_insert(if looks_fractional {
@@ -142,10 +156,17 @@ impl CsvDecoder {
                 .filter(|v| v.is_finite() && v.abs() < 9e18)
                 .map(|v| v.round() as i64),
         }
-        .ok_or_else(|| self.error(offset, format!("field t: `{}` is not a time", fields[0])))?;
+        .ok_or_else(|| {
+            self.error(
+                path,
+                offset,
+                format!("field t: `{}` is not a time", fields[0]),
+            )
+        })?;
         let coordinate = |index: usize, name: &str| {
             fields[index].parse::<u16>().map_err(|_| {
                 self.error(
+                    path,
                     offset,
                     format!(
                         "field {name}: `{}` is not a coordinate in 0..=65535",
@@ -161,6 +182,7 @@ impl CsvDecoder {
             "0" | "-1" => false,
             other => {
                 return Err(self.error(
+                    path,
                     offset,
                     format!("field p: `{other}` is not a polarity (accepted: 1, 0, -1)"),
                 ))
@@ -175,6 +197,7 @@ mod tests {
     use std::io::Cursor;
 
     use super::*;
+    use crate::report::DecodeReport;
 
     fn decode(text: &str) -> Result<(Vec<Event>, DecodeReport), DecodeError> {
         let source = ByteSource::new(

@@ -6,8 +6,11 @@
 use evgate_core::{Event, SensorSize};
 
 use crate::error::DecodeError;
-use crate::report::{Admission, DecodeReport};
+use crate::format::Format;
+use crate::records::{BadRecord, RecordFormat};
+use crate::report::Admission;
 use crate::source::ByteSource;
+use crate::stream_decoder::StreamDecoder;
 
 /// Event types whose 8-byte records hold change-detection events: 0x0C (`CD`) in current files,
 /// 0x00 (`TD`) in ATIS-era ones.
@@ -15,12 +18,13 @@ const CD_EVENT_TYPES: [u8; 2] = [0x0c, 0x00];
 const RECORD_BYTES: usize = 8;
 const TIME_WRAP: i64 = 1 << 32;
 
-pub struct DatDecoder {
-    source: ByteSource,
-    admission: Admission,
+/// The 32-bit time counter DAT records carry from one to the next.
+pub struct DatRecords {
     last_raw_t: Option<u32>,
     wraps: i64,
 }
+
+pub type DatDecoder = StreamDecoder<DatRecords>;
 
 impl DatDecoder {
     /// `source` must be positioned after the `%` header; reads the type and size bytes.
@@ -37,54 +41,47 @@ impl DatDecoder {
                 ),
             });
         }
-        Ok(Self {
+        Ok(Self::from_parts(
             source,
-            admission: Admission::new(sensor_size),
-            last_raw_t: None,
-            wraps: 0,
-        })
+            sensor_size,
+            DatRecords {
+                last_raw_t: None,
+                wraps: 0,
+            },
+        ))
     }
+}
 
-    pub fn sensor_size(&self) -> SensorSize {
-        self.admission.sensor_size()
-    }
+impl RecordFormat for DatRecords {
+    const FORMAT: Format = Format::Dat;
+    const RECORD_BYTES: usize = RECORD_BYTES;
+    const RECORD_NAME: &'static str = "a DAT record";
 
-    pub fn report(&self) -> &DecodeReport {
-        &self.admission.report
-    }
-
-    pub fn bytes_read(&self) -> u64 {
-        self.source.offset()
-    }
-
-    /// Clears `out` and fills it with the events of the next block; 0 means end of stream.
-    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
-        out.clear();
-        while out.is_empty() {
-            let (start, bytes) = self.source.next_records(RECORD_BYTES, "a DAT record")?;
-            if bytes.is_empty() {
-                break;
-            }
-            for (i, record) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
-                let raw_t = u32::from_le_bytes([record[0], record[1], record[2], record[3]]);
-                let data = u32::from_le_bytes([record[4], record[5], record[6], record[7]]);
-                if let Some(last) = self.last_raw_t {
-                    if raw_t < last && last - raw_t > 1 << 31 {
-                        self.wraps = self.wraps.saturating_add(TIME_WRAP);
-                    }
+    fn decode_records(
+        &mut self,
+        start: u64,
+        bytes: &[u8],
+        admission: &mut Admission,
+        out: &mut Vec<Event>,
+    ) -> Result<(), BadRecord> {
+        for (i, record) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
+            let raw_t = u32::from_le_bytes([record[0], record[1], record[2], record[3]]);
+            let data = u32::from_le_bytes([record[4], record[5], record[6], record[7]]);
+            if let Some(last) = self.last_raw_t {
+                if raw_t < last && last - raw_t > 1 << 31 {
+                    self.wraps = self.wraps.saturating_add(TIME_WRAP);
                 }
-                self.last_raw_t = Some(raw_t);
-                let event = Event::new(
-                    self.wraps.saturating_add(raw_t as i64),
-                    (data & 0x3fff) as u16,
-                    ((data >> 14) & 0x3fff) as u16,
-                    (data >> 28) != 0,
-                );
-                self.admission
-                    .admit(out, event, start + (i * RECORD_BYTES) as u64);
             }
+            self.last_raw_t = Some(raw_t);
+            let event = Event::new(
+                self.wraps.saturating_add(raw_t as i64),
+                (data & 0x3fff) as u16,
+                ((data >> 14) & 0x3fff) as u16,
+                (data >> 28) != 0,
+            );
+            admission.admit(out, event, start + (i * RECORD_BYTES) as u64);
         }
-        Ok(out.len())
+        Ok(())
     }
 }
 

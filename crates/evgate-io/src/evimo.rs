@@ -13,9 +13,12 @@ use std::sync::mpsc::{sync_channel, Receiver};
 use evgate_core::{Event, SensorSize};
 
 use crate::error::DecodeError;
+use crate::format::Format;
 use crate::npy::{read_header, DType};
-use crate::report::{Admission, DecodeReport};
+use crate::records::{BadRecord, RecordFormat};
+use crate::report::Admission;
 use crate::source::{ByteSource, BLOCK_BYTES};
+use crate::stream_decoder::StreamDecoder;
 
 const RECORD_BYTES: usize = 32;
 /// Inflated blocks in flight between the helper thread and the decoder.
@@ -92,10 +95,10 @@ pub(crate) fn open_member(path: &Path, member: &str) -> Result<Option<MemberStre
     }))
 }
 
-pub struct EvimoDecoder {
-    source: ByteSource,
-    admission: Admission,
-}
+/// EVIMO's float64 rows `[t seconds, x, y, p]`: each row stands alone.
+pub struct EvimoRows;
+
+pub type EvimoDecoder = StreamDecoder<EvimoRows>;
 
 impl EvimoDecoder {
     /// Opens the `events` member; `sensor_size` overrides the size taken from `mask`.
@@ -124,78 +127,60 @@ impl EvimoDecoder {
             Some(size) => size,
             None => mask_size(path)?.unwrap_or(crate::reader::UNBOUNDED_SENSOR),
         };
-        Ok(Self {
-            source: ByteSource::new(member_path, Box::new(events)),
-            admission: Admission::new(sensor_size),
-        })
+        Ok(Self::from_parts(
+            ByteSource::new(member_path, Box::new(events)),
+            sensor_size,
+            EvimoRows,
+        ))
     }
+}
 
-    pub fn sensor_size(&self) -> SensorSize {
-        self.admission.sensor_size()
-    }
+impl RecordFormat for EvimoRows {
+    const FORMAT: Format = Format::EvimoNpz;
+    const RECORD_BYTES: usize = RECORD_BYTES;
+    const RECORD_NAME: &'static str = "an EVIMO event row";
 
-    pub fn report(&self) -> &DecodeReport {
-        &self.admission.report
-    }
-
-    /// Bytes of the inflated `events` array consumed so far.
-    pub fn bytes_read(&self) -> u64 {
-        self.source.offset()
-    }
-
-    /// Clears `out` and fills it with the events of the next block; 0 means end of stream.
-    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
-        out.clear();
-        while out.is_empty() {
-            let (start, bytes) = self
-                .source
-                .next_records(RECORD_BYTES, "an EVIMO event row")?;
-            if bytes.is_empty() {
-                break;
-            }
-            let mut invalid = None;
-            for (i, row) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
-                let value = |k: usize| {
-                    f64::from_le_bytes(row[8 * k..8 * k + 8].try_into().expect("8 bytes"))
-                };
-                let (t, x, y, p) = (value(0), value(1), value(2), value(3));
-                let offset = start + (i * RECORD_BYTES) as u64;
-                let coordinate =
-                    |v: f64| (v.fract() == 0.0 && (0.0..=65535.0).contains(&v)).then_some(v as u16);
-                let micros = t * 1e6;
-                let on = match p {
-                    1.0 => Some(true),
-                    0.0 | -1.0 => Some(false),
-                    _ => None,
-                };
-                match (
-                    micros.is_finite() && micros.abs() < 9e18,
-                    coordinate(x),
-                    coordinate(y),
-                    on,
-                ) {
-                    (true, Some(x), Some(y), Some(on)) => self.admission.admit(
-                        out,
-                        Event::new(micros.round() as i64, x, y, on),
+    fn decode_records(
+        &mut self,
+        start: u64,
+        bytes: &[u8],
+        admission: &mut Admission,
+        out: &mut Vec<Event>,
+    ) -> Result<(), BadRecord> {
+        for (i, row) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
+            let value =
+                |k: usize| f64::from_le_bytes(row[8 * k..8 * k + 8].try_into().expect("8 bytes"));
+            let (t, x, y, p) = (value(0), value(1), value(2), value(3));
+            let offset = start + (i * RECORD_BYTES) as u64;
+            let coordinate =
+                |v: f64| (v.fract() == 0.0 && (0.0..=65535.0).contains(&v)).then_some(v as u16);
+            let micros = t * 1e6;
+            let on = match p {
+                1.0 => Some(true),
+                0.0 | -1.0 => Some(false),
+                _ => None,
+            };
+            match (
+                micros.is_finite() && micros.abs() < 9e18,
+                coordinate(x),
+                coordinate(y),
+                on,
+            ) {
+                (true, Some(x), Some(y), Some(on)) => {
+                    admission.admit(out, Event::new(micros.round() as i64, x, y, on), offset)
+                }
+                _ => {
+                    let row = [t, x, y, p];
+                    return Err(BadRecord {
                         offset,
-                    ),
-                    _ => {
-                        invalid = Some((offset, [t, x, y, p]));
-                        break;
-                    }
+                        problem: format!(
+                            "row {row:?} is not [t seconds, x, y, p] with integral coordinates in 0..=65535 and p in 1, 0, -1"
+                        ),
+                    });
                 }
             }
-            if let Some((offset, row)) = invalid {
-                return Err(DecodeError::Malformed {
-                    path: self.source.path().to_path_buf(),
-                    offset,
-                    problem: format!(
-                        "row {row:?} is not [t seconds, x, y, p] with integral coordinates in 0..=65535 and p in 1, 0, -1"
-                    ),
-                });
-            }
         }
-        Ok(out.len())
+        Ok(())
     }
 }
 

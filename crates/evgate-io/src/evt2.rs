@@ -7,77 +7,73 @@
 
 use evgate_core::{Event, SensorSize};
 
-use crate::error::DecodeError;
-use crate::report::{Admission, DecodeReport};
+use crate::format::Format;
+use crate::records::{BadRecord, RecordFormat};
+use crate::report::Admission;
 use crate::source::ByteSource;
+use crate::stream_decoder::StreamDecoder;
 
 const TIME_HIGH_WRAP: i64 = 1 << 34;
 
-pub struct Evt2Decoder {
-    source: ByteSource,
-    admission: Admission,
+/// The time base EVT 2.0 words carry from one to the next.
+pub struct Evt2Words {
     time_high: i64,
     wraps: i64,
 }
 
+pub type Evt2Decoder = StreamDecoder<Evt2Words>;
+
 impl Evt2Decoder {
     /// `source` must be positioned after the `%` header.
     pub fn new(source: ByteSource, sensor_size: SensorSize) -> Self {
-        Self {
+        Self::from_parts(
             source,
-            admission: Admission::new(sensor_size),
-            time_high: 0,
-            wraps: 0,
-        }
+            sensor_size,
+            Evt2Words {
+                time_high: 0,
+                wraps: 0,
+            },
+        )
     }
+}
 
-    pub fn sensor_size(&self) -> SensorSize {
-        self.admission.sensor_size()
-    }
+impl RecordFormat for Evt2Words {
+    const FORMAT: Format = Format::Evt2;
+    const RECORD_BYTES: usize = 4;
+    const RECORD_NAME: &'static str = "an EVT 2.0 word";
 
-    pub fn report(&self) -> &DecodeReport {
-        &self.admission.report
-    }
-
-    pub fn bytes_read(&self) -> u64 {
-        self.source.offset()
-    }
-
-    /// Clears `out` and fills it with the events of the next block; 0 means end of stream.
-    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
-        out.clear();
-        while out.is_empty() {
-            let (start, bytes) = self.source.next_records(4, "an EVT 2.0 word")?;
-            if bytes.is_empty() {
-                break;
-            }
-            for (i, word) in bytes.chunks_exact(4).enumerate() {
-                let word = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
-                let offset = start + 4 * i as u64;
-                match word >> 28 {
-                    kind @ (0x0 | 0x1) => {
-                        // Saturating: adversarial input can repeat wraps past the i64 range.
-                        let t = self
-                            .wraps
-                            .saturating_add(self.time_high + ((word >> 22) & 0x3f) as i64);
-                        let x = ((word >> 11) & 0x7ff) as u16;
-                        let y = (word & 0x7ff) as u16;
-                        self.admission
-                            .admit(out, Event::new(t, x, y, kind == 1), offset);
-                    }
-                    0x8 => {
-                        let time_high = ((word & 0x0fff_ffff) as i64) << 6;
-                        if time_high < self.time_high {
-                            self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
-                        }
-                        self.time_high = time_high;
-                    }
-                    0xA | 0xE | 0xF => {}
-                    _ => self.admission.report.skip_word(offset),
+    fn decode_records(
+        &mut self,
+        start: u64,
+        bytes: &[u8],
+        admission: &mut Admission,
+        out: &mut Vec<Event>,
+    ) -> Result<(), BadRecord> {
+        for (i, word) in bytes.chunks_exact(4).enumerate() {
+            let word = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
+            let offset = start + 4 * i as u64;
+            match word >> 28 {
+                kind @ (0x0 | 0x1) => {
+                    // Saturating: adversarial input can repeat wraps past the i64 range.
+                    let t = self
+                        .wraps
+                        .saturating_add(self.time_high + ((word >> 22) & 0x3f) as i64);
+                    let x = ((word >> 11) & 0x7ff) as u16;
+                    let y = (word & 0x7ff) as u16;
+                    admission.admit(out, Event::new(t, x, y, kind == 1), offset);
                 }
+                0x8 => {
+                    let time_high = ((word & 0x0fff_ffff) as i64) << 6;
+                    if time_high < self.time_high {
+                        self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
+                    }
+                    self.time_high = time_high;
+                }
+                0xA | 0xE | 0xF => {}
+                _ => admission.report.skip_word(offset),
             }
         }
-        Ok(out.len())
+        Ok(())
     }
 }
 
@@ -86,6 +82,7 @@ mod tests {
     use std::io::Cursor;
 
     use super::*;
+    use crate::report::DecodeReport;
 
     fn decode(words: &[u32]) -> (Vec<Event>, DecodeReport) {
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();

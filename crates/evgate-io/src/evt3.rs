@@ -18,9 +18,11 @@
 
 use evgate_core::{Event, SensorSize};
 
-use crate::error::DecodeError;
-use crate::report::{Admission, DecodeReport};
+use crate::format::Format;
+use crate::records::{BadRecord, RecordFormat};
+use crate::report::Admission;
 use crate::source::ByteSource;
+use crate::stream_decoder::StreamDecoder;
 
 const TIME_HIGH_WRAP: i64 = 1 << 24;
 /// What one carry of the 12-bit `TIME_LOW` adds under [`Evt3TimeLow::CarryOnStepBack`].
@@ -73,9 +75,8 @@ impl std::str::FromStr for Evt3TimeLow {
     }
 }
 
-pub struct Evt3Decoder {
-    source: ByteSource,
-    admission: Admission,
+/// The state EVT 3.0 words carry from one to the next: time base, row, vector base.
+pub struct Evt3Words {
     time_low: i64,
     time_high: i64,
     wraps: i64,
@@ -85,109 +86,100 @@ pub struct Evt3Decoder {
     time_low_rule: Evt3TimeLow,
 }
 
+pub type Evt3Decoder = StreamDecoder<Evt3Words>;
+
 impl Evt3Decoder {
     /// `source` must be positioned after the `%` header; `time_offset` is added to every time.
     pub fn new(source: ByteSource, sensor_size: SensorSize, time_offset: i64) -> Self {
-        Self {
+        Self::from_parts(
             source,
-            admission: Admission::new(sensor_size),
-            time_low: 0,
-            time_high: 0,
-            wraps: time_offset,
-            y: 0,
-            base_x: 0,
-            vector_on: false,
-            time_low_rule: Evt3TimeLow::default(),
-        }
+            sensor_size,
+            Evt3Words {
+                time_low: 0,
+                time_high: 0,
+                wraps: time_offset,
+                y: 0,
+                base_x: 0,
+                vector_on: false,
+                time_low_rule: Evt3TimeLow::default(),
+            },
+        )
     }
 
     /// Reads `TIME_LOW` steps back by `rule` instead of the EVT 3.0 rule.
     pub fn with_time_low_rule(mut self, rule: Evt3TimeLow) -> Self {
-        self.time_low_rule = rule;
+        self.format.time_low_rule = rule;
         self
     }
+}
 
-    pub fn sensor_size(&self) -> SensorSize {
-        self.admission.sensor_size()
-    }
+impl RecordFormat for Evt3Words {
+    const FORMAT: Format = Format::Evt3;
+    const RECORD_BYTES: usize = 2;
+    const RECORD_NAME: &'static str = "an EVT 3.0 word";
 
-    pub fn report(&self) -> &DecodeReport {
-        &self.admission.report
-    }
-
-    pub fn bytes_read(&self) -> u64 {
-        self.source.offset()
-    }
-
-    /// Clears `out` and fills it with the events of the next block; 0 means end of stream.
-    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
-        out.clear();
-        while out.is_empty() {
-            let (start, bytes) = self.source.next_records(2, "an EVT 3.0 word")?;
-            if bytes.is_empty() {
-                break;
-            }
-            for (i, word) in bytes.chunks_exact(2).enumerate() {
-                let word = u16::from_le_bytes([word[0], word[1]]);
-                let offset = start + 2 * i as u64;
-                // Saturating: adversarial input can repeat wraps past the i64 range.
-                let t = self
-                    .wraps
-                    .saturating_add((self.time_high << 12) + self.time_low);
-                match word >> 12 {
-                    0x0 => self.y = word & 0x7ff,
-                    0x2 => {
-                        let on = word & 0x800 != 0;
-                        self.admission
-                            .admit(out, Event::new(t, word & 0x7ff, self.y, on), offset);
-                    }
-                    0x3 => {
-                        self.base_x = word & 0x7ff;
-                        self.vector_on = word & 0x800 != 0;
-                    }
-                    kind @ (0x4 | 0x5) => {
-                        let (width, mask) = if kind == 0x4 {
-                            (12, word & 0xfff)
-                        } else {
-                            (8, word & 0xff)
-                        };
-                        let mut bits = mask;
-                        while bits != 0 {
-                            let bit = bits.trailing_zeros() as u16;
-                            bits &= bits - 1;
-                            // Columns past the 11-bit range wrap in the sensor's arithmetic;
-                            // saturating keeps them off the sensor so they are dropped and counted.
-                            let x = self.base_x.saturating_add(bit);
-                            self.admission.admit(
-                                out,
-                                Event::new(t, x, self.y, self.vector_on),
-                                offset,
-                            );
-                        }
-                        self.base_x = self.base_x.saturating_add(width);
-                    }
-                    0x6 => {
-                        let time_low = (word & 0xfff) as i64;
-                        if self.time_low_rule == Evt3TimeLow::CarryOnStepBack
-                            && time_low < self.time_low
-                        {
-                            self.wraps = self.wraps.saturating_add(TIME_LOW_CARRY);
-                        }
-                        self.time_low = time_low;
-                    }
-                    0x8 => {
-                        let time_high = (word & 0xfff) as i64;
-                        if time_high < self.time_high {
-                            self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
-                        }
-                        self.time_high = time_high;
-                    }
-                    0x7 | 0xA | 0xE | 0xF => {}
-                    _ => self.admission.report.skip_word(offset),
+    fn decode_records(
+        &mut self,
+        start: u64,
+        bytes: &[u8],
+        admission: &mut Admission,
+        out: &mut Vec<Event>,
+    ) -> Result<(), BadRecord> {
+        for (i, word) in bytes.chunks_exact(2).enumerate() {
+            let word = u16::from_le_bytes([word[0], word[1]]);
+            let offset = start + 2 * i as u64;
+            // Saturating: adversarial input can repeat wraps past the i64 range.
+            let t = self
+                .wraps
+                .saturating_add((self.time_high << 12) + self.time_low);
+            match word >> 12 {
+                0x0 => self.y = word & 0x7ff,
+                0x2 => {
+                    let on = word & 0x800 != 0;
+                    admission.admit(out, Event::new(t, word & 0x7ff, self.y, on), offset);
                 }
+                0x3 => {
+                    self.base_x = word & 0x7ff;
+                    self.vector_on = word & 0x800 != 0;
+                }
+                kind @ (0x4 | 0x5) => {
+                    let (width, mask) = if kind == 0x4 {
+                        (12, word & 0xfff)
+                    } else {
+                        (8, word & 0xff)
+                    };
+                    let mut bits = mask;
+                    while bits != 0 {
+                        let bit = bits.trailing_zeros() as u16;
+                        bits &= bits - 1;
+                        // Columns past the 11-bit range wrap in the sensor's arithmetic;
+                        // saturating keeps them off the sensor so they are dropped and counted.
+                        let x = self.base_x.saturating_add(bit);
+                        admission.admit(out, Event::new(t, x, self.y, self.vector_on), offset);
+                    }
+                    self.base_x = self.base_x.saturating_add(width);
+                }
+                0x6 => {
+                    let time_low = (word & 0xfff) as i64;
+                    if self.time_low_rule == Evt3TimeLow::CarryOnStepBack
+                        && time_low < self.time_low
+                    {
+                        self.wraps = self.wraps.saturating_add(TIME_LOW_CARRY);
+                    }
+                    self.time_low = time_low;
+                }
+                0x8 => {
+                    let time_high = (word & 0xfff) as i64;
+                    if time_high < self.time_high {
+                        self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
+                    }
+                    self.time_high = time_high;
+                }
+                0x7 | 0xA | 0xE | 0xF => {}
+                _ => admission.report.skip_word(offset),
             }
         }
-        Ok(out.len())
+        Ok(())
     }
 }
 
@@ -196,6 +188,7 @@ mod tests {
     use std::io::Cursor;
 
     use super::*;
+    use crate::report::DecodeReport;
 
     fn decode(words: &[u16], sensor_size: SensorSize) -> (Vec<Event>, DecodeReport) {
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();

@@ -29,9 +29,11 @@ pub mod npz;
 pub mod pickle;
 pub mod pyvalue;
 pub mod reader;
+pub mod records;
 pub mod report;
 pub mod sequence;
 pub mod source;
+pub mod stream_decoder;
 pub mod writer;
 
 pub use error::DecodeError;

@@ -4,8 +4,11 @@
 use evgate_core::{Event, SensorSize};
 
 use crate::error::DecodeError;
-use crate::report::{Admission, DecodeReport};
+use crate::format::Format;
+use crate::records::{BadRecord, RecordFormat};
+use crate::report::Admission;
 use crate::source::ByteSource;
+use crate::stream_decoder::StreamDecoder;
 
 /// Like PNG's: a non-ASCII first byte and CR-LF / Ctrl-Z / LF catch text-mode transfers.
 pub const MAGIC: [u8; 8] = *b"\x89EVG\r\n\x1a\n";
@@ -36,12 +39,13 @@ pub fn encode_record(event: &Event) -> [u8; RECORD_BYTES] {
     record
 }
 
-pub struct NativeDecoder {
-    source: ByteSource,
-    admission: Admission,
+/// The event count the header declares, checked against the records at the end.
+pub struct NativeRecords {
     declared_count: Option<u64>,
     records_seen: u64,
 }
+
+pub type NativeDecoder = StreamDecoder<NativeRecords>;
 
 impl NativeDecoder {
     /// Reads and checks the header; `source` must be at the start of the file.
@@ -85,75 +89,64 @@ impl NativeDecoder {
             ));
         }
         let count = u64::from_le_bytes(header[16..24].try_into().expect("8 header bytes"));
-        Ok(Self {
+        Ok(Self::from_parts(
             source,
-            admission: Admission::new(SensorSize::new(width, height)),
-            declared_count: (count != UNKNOWN_COUNT).then_some(count),
-            records_seen: 0,
-        })
+            SensorSize::new(width, height),
+            NativeRecords {
+                declared_count: (count != UNKNOWN_COUNT).then_some(count),
+                records_seen: 0,
+            },
+        ))
     }
+}
 
-    pub fn sensor_size(&self) -> SensorSize {
-        self.admission.sensor_size()
-    }
+impl RecordFormat for NativeRecords {
+    const FORMAT: Format = Format::Native;
+    const RECORD_BYTES: usize = RECORD_BYTES;
+    const RECORD_NAME: &'static str = "an .evg record";
 
-    pub fn report(&self) -> &DecodeReport {
-        &self.admission.report
-    }
-
-    pub fn bytes_read(&self) -> u64 {
-        self.source.offset()
-    }
-
-    /// Clears `out` and fills it with the events of the next block; 0 means end of stream.
-    pub fn read_chunk(&mut self, out: &mut Vec<Event>) -> Result<usize, DecodeError> {
-        out.clear();
-        while out.is_empty() {
-            let (start, bytes) = self.source.next_records(RECORD_BYTES, "an .evg record")?;
-            if bytes.is_empty() {
-                if let Some(declared) = self.declared_count {
-                    if declared != self.records_seen {
-                        return Err(DecodeError::Malformed {
-                            path: self.source.path().to_path_buf(),
-                            offset: start,
-                            problem: format!(
-                                "the header declares {declared} events, the file holds {}",
-                                self.records_seen
-                            ),
-                        });
-                    }
-                }
-                break;
-            }
-            let mut invalid = None;
-            for (i, record) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
-                let offset = start + (i * RECORD_BYTES) as u64;
-                let polarity = record[12];
-                if polarity > 1 || record[13..16] != [0, 0, 0] {
-                    invalid = Some((offset + 12, polarity, [record[13], record[14], record[15]]));
-                    break;
-                }
-                let event = Event::new(
-                    i64::from_le_bytes(record[..8].try_into().expect("8 time bytes")),
-                    u16::from_le_bytes([record[8], record[9]]),
-                    u16::from_le_bytes([record[10], record[11]]),
-                    polarity == 1,
-                );
-                self.admission.admit(out, event, offset);
-            }
-            let records = (bytes.len() / RECORD_BYTES) as u64;
-            if let Some((offset, polarity, reserved)) = invalid {
-                return Err(DecodeError::Malformed {
-                    path: self.source.path().to_path_buf(),
-                    offset,
+    fn decode_records(
+        &mut self,
+        start: u64,
+        bytes: &[u8],
+        admission: &mut Admission,
+        out: &mut Vec<Event>,
+    ) -> Result<(), BadRecord> {
+        for (i, record) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
+            let offset = start + (i * RECORD_BYTES) as u64;
+            let polarity = record[12];
+            let reserved = [record[13], record[14], record[15]];
+            if polarity > 1 || reserved != [0, 0, 0] {
+                return Err(BadRecord {
+                    offset: offset + 12,
                     problem: format!(
                         "polarity byte {polarity} and reserved bytes {reserved:?} must be 0/1 and zero"
                     ),
                 });
             }
-            self.records_seen += records;
+            let event = Event::new(
+                i64::from_le_bytes(record[..8].try_into().expect("8 time bytes")),
+                u16::from_le_bytes([record[8], record[9]]),
+                u16::from_le_bytes([record[10], record[11]]),
+                polarity == 1,
+            );
+            admission.admit(out, event, offset);
         }
-        Ok(out.len())
+        self.records_seen += (bytes.len() / RECORD_BYTES) as u64;
+        Ok(())
+    }
+
+    fn at_end(&mut self, offset: u64) -> Result<(), BadRecord> {
+        match self.declared_count {
+            Some(declared) if declared != self.records_seen => Err(BadRecord {
+                offset,
+                problem: format!(
+                    "the header declares {declared} events, the file holds {}",
+                    self.records_seen
+                ),
+            }),
+            _ => Ok(()),
+        }
     }
 }
 

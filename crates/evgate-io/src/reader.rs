@@ -54,13 +54,7 @@ macro_rules! event_reader {
     };
 }
 
-event_reader!(Evt2Decoder, Format::Evt2);
-event_reader!(Evt3Decoder, Format::Evt3);
-event_reader!(DatDecoder, Format::Dat);
-event_reader!(Aedat4Decoder, Format::Aedat4);
-event_reader!(CsvDecoder, Format::Csv);
-event_reader!(NativeDecoder, Format::Native);
-event_reader!(EvimoDecoder, Format::EvimoNpz);
+// The byte-stream decoders get theirs from `StreamDecoder`.
 event_reader!(Evimo2EventsDecoder, Format::Evimo2Folder);
 #[cfg(feature = "dsec")]
 event_reader!(crate::dsec::DsecReader, Format::Dsec);

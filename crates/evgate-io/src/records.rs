@@ -1,0 +1,63 @@
+//! Formats of fixed-size records (EVT 2.0 and 3.0 words, DAT records, `.evg` events, EVIMO
+//! rows) share the chunk loop: take the whole records buffered, decode them, repeat until an
+//! event comes out or the stream ends (a partial record at the end is an error).
+
+use evgate_core::Event;
+
+use crate::error::DecodeError;
+use crate::format::Format;
+use crate::report::Admission;
+use crate::stream_decoder::{ChunkFormat, DecoderInput};
+
+/// A record that cannot be decoded: where it is and what is wrong.
+pub struct BadRecord {
+    pub offset: u64,
+    pub problem: String,
+}
+
+pub trait RecordFormat: Send {
+    const FORMAT: Format;
+    const RECORD_BYTES: usize;
+    /// Names a record in truncation errors ("an EVT 2.0 word").
+    const RECORD_NAME: &'static str;
+
+    /// Decodes whole records (the first at file offset `start`) into `out` through
+    /// `admission`.
+    fn decode_records(
+        &mut self,
+        start: u64,
+        records: &[u8],
+        admission: &mut Admission,
+        out: &mut Vec<Event>,
+    ) -> Result<(), BadRecord>;
+
+    /// Called when the stream ends at `offset` (after the last whole record).
+    fn at_end(&mut self, _offset: u64) -> Result<(), BadRecord> {
+        Ok(())
+    }
+}
+
+impl<R: RecordFormat> ChunkFormat for R {
+    const FORMAT: Format = R::FORMAT;
+
+    fn decode_chunk(
+        &mut self,
+        input: &mut DecoderInput,
+        out: &mut Vec<Event>,
+    ) -> Result<(), DecodeError> {
+        while out.is_empty() {
+            let (start, records) = input.source.next_records(R::RECORD_BYTES, R::RECORD_NAME)?;
+            let end = records.is_empty();
+            let decoded = if end {
+                self.at_end(start)
+            } else {
+                self.decode_records(start, records, &mut input.admission, out)
+            };
+            decoded.map_err(|bad| input.malformed(bad.offset, bad.problem))?;
+            if end {
+                break;
+            }
+        }
+        Ok(())
+    }
+}
