@@ -79,13 +79,19 @@ struct PresetSpeed {
 #[derive(Serialize)]
 #[serde(rename_all = "kebab-case")]
 struct Report {
+    /// Worker threads of each simulator (the cores this process may use).
     threads: usize,
     seed: u64,
+    /// The machine's 1-minute load average before and after the timed runs: on a shared
+    /// machine the wall times depend on it.
+    load_average_before: Option<f64>,
+    load_average_after: Option<f64>,
     presets: Vec<PresetSpeed>,
 }
 
 /// One continuous simulated second per preset, timed end to end (scene setup excluded).
 fn realtime_report() -> Report {
+    let load_average_before = load_average();
     let simulated_us = 1_000_000;
     let presets = presets()
         .into_iter()
@@ -119,8 +125,20 @@ fn realtime_report() -> Report {
             .map(|n| n.get())
             .unwrap_or(1),
         seed: SEED,
+        load_average_before,
+        load_average_after: load_average(),
         presets,
     }
+}
+
+/// The 1-minute load average from `/proc/loadavg` (`None` where there is none).
+fn load_average() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
 }
 
 /// User plus system CPU seconds used by this process so far.
@@ -141,6 +159,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     benches();
     Criterion::default().configure_from_args().final_summary();
     let report = realtime_report();
+    println!(
+        "{} threads; load average {:?} before, {:?} after",
+        report.threads, report.load_average_before, report.load_average_after
+    );
     for p in &report.presets {
         println!(
             "{:>9} {}x{}: {:.2}x real time ({:.2} s wall, {:.2} CPU s per simulated s), {:.0} renders/s, {:.2} M events/s, {:.1} % object events",
