@@ -115,44 +115,12 @@ pub fn partition(
     let lookup = MaskLookup::new(mask);
     let inversion = mode.inversion();
     let mut outputs = Outputs::new([kept, suppressed], events.len());
-    outputs.route(events, move |event| {
+    outputs.route(events, |event| {
         let (_, bit) = lookup.probe(event);
-        Some(bit ^ inversion)
+        bit ^ inversion
     });
     let [kept_count, _] = outputs.finish();
     kept_count
-}
-
-/// The partition's inner loop, apart so that its cursors stay in registers: routes events while
-/// `route_of` judges them (see `Outputs::route`) and returns how many it routed and the new
-/// kept and suppressed cursors.
-///
-/// # Safety
-/// `bases[k]` must be valid for writes of `cursors[k] + run.len()` events.
-#[inline(never)]
-unsafe fn route_while_judged(
-    run: &[Event],
-    bases: [*mut Event; 2],
-    cursors: [usize; 2],
-    route_of: impl Fn(&Event) -> Option<u64>,
-) -> (usize, [usize; 2]) {
-    let [kept_base, suppressed_base] = bases;
-    let [mut kept, mut suppressed] = cursors;
-    for (index, event) in run.iter().enumerate() {
-        let Some(keep) = route_of(event) else {
-            return (index, [kept, suppressed]);
-        };
-        // Branch-free: write at both cursors and advance only the chosen one. Both cursors
-        // grow by at most one per routed event, so they stay within the caller's bound.
-        // SAFETY: see the function's contract.
-        unsafe {
-            kept_base.add(kept).write(*event);
-            suppressed_base.add(suppressed).write(*event);
-        }
-        kept += keep as usize;
-        suppressed += 1 - keep as usize;
-    }
-    (run.len(), [kept, suppressed])
 }
 
 /// Writes one keep bit per event into `keep` (bit i of word i / 64 for event i; the rest of the
@@ -191,7 +159,9 @@ fn check_bitmap(words: &[u64], events: usize) -> Result<(), GateError> {
     Ok(())
 }
 
-/// Position of the unjudged vector among a forecast partition's outputs.
+/// Positions of the output vectors of a partition.
+const KEPT: usize = 0;
+const SUPPRESSED: usize = 1;
 const UNJUDGED: usize = 2;
 
 /// The output vectors of a partition (kept, suppressed and, for a forecast, unjudged), filled
@@ -210,28 +180,55 @@ impl<'a, const N: usize> Outputs<'a, N> {
         Self { vectors, written }
     }
 
-    /// Routes every event of `run`: `Some(keep)` (keep is 0 or 1) sends it to the kept
-    /// (first) or the suppressed (second) vector, `None` to the unjudged vector (the third; a
-    /// two-vector `Outputs` must never get `None`). At most as many events as were announced to
-    /// `new` may be routed in all.
+    /// Appends each event of `events` to the kept vector when `keep_of` gives 1, to the
+    /// suppressed one when it gives 0. At most as many events as were announced to `new` may be
+    /// routed in all.
     #[inline(always)]
-    fn route(&mut self, run: &[Event], route_of: impl Fn(&Event) -> Option<u64> + Copy) {
-        let bases = [self.vectors[0].as_mut_ptr(), self.vectors[1].as_mut_ptr()];
-        let capacities = [self.vectors[0].capacity(), self.vectors[1].capacity()];
-        let mut rest = run;
-        loop {
-            let cursors = [self.written[0], self.written[1]];
+    fn route(&mut self, events: &[Event], keep_of: impl Fn(&Event) -> u64) {
+        // Bases and cursors live in locals for the loop: kept behind `&mut Vec`, every write
+        // of an event would make the compiler reload them.
+        let kept_base = self.vectors[KEPT].as_mut_ptr();
+        let suppressed_base = self.vectors[SUPPRESSED].as_mut_ptr();
+        let [mut kept, mut suppressed] = [self.written[KEPT], self.written[SUPPRESSED]];
+        for event in events {
+            let keep = keep_of(event) as usize;
+            debug_assert!(kept < self.vectors[KEPT].capacity());
+            debug_assert!(suppressed < self.vectors[SUPPRESSED].capacity());
+            // Branch-free: write at both cursors and advance only the chosen one.
             // SAFETY: `new` reserved one slot per announced event beyond each initial length,
-            // so every cursor plus the events still to route stays within capacity.
-            debug_assert!((0..2).all(|k| cursors[k] + rest.len() <= capacities[k]));
-            let (routed, cursors) = unsafe { route_while_judged(rest, bases, cursors, route_of) };
-            [self.written[0], self.written[1]] = cursors;
-            let Some((unjudged, after)) = rest[routed..].split_first() else {
-                return;
-            };
-            self.push_all_into(UNJUDGED, std::slice::from_ref(unjudged));
-            rest = after;
+            // and each event advances one cursor, so both cursors stay below capacity.
+            unsafe {
+                kept_base.add(kept).write(*event);
+                suppressed_base.add(suppressed).write(*event);
+            }
+            kept += keep;
+            suppressed += 1 - keep;
         }
+        [self.written[KEPT], self.written[SUPPRESSED]] = [kept, suppressed];
+    }
+
+    /// Appends the events of `chunk` (at most 64) whose bit is set in `bits` to vector `index`,
+    /// in order; set bits are found by trailing-zero counts, a full word is one copy.
+    #[inline(always)]
+    fn push_selected(&mut self, index: usize, chunk: &[Event], bits: u64) {
+        let all = u64::MAX >> (64 - chunk.len());
+        if bits == all {
+            self.push_all_into(index, chunk);
+            return;
+        }
+        let base = self.vectors[index].as_mut_ptr();
+        let mut written = self.written[index];
+        let mut rest = bits & all;
+        while rest != 0 {
+            let event = chunk[rest.trailing_zeros() as usize];
+            debug_assert!(written < self.vectors[index].capacity());
+            // SAFETY: `new` reserved one slot per announced event and each event is pushed
+            // once, into one vector.
+            unsafe { base.add(written).write(event) };
+            written += 1;
+            rest &= rest - 1;
+        }
+        self.written[index] = written;
     }
 
     /// Appends `events` to vector `index`.
@@ -256,7 +253,8 @@ impl<'a, const N: usize> Outputs<'a, N> {
         for ((vector, written), gain) in self.vectors.into_iter().zip(self.written).zip(&mut gained)
         {
             *gain = written - vector.len();
-            // SAFETY: every slot below `written` was initialised by `push`.
+            // SAFETY: every slot below `written` was initialised by `route`, `push_selected`
+            // or `push_all_into`.
             unsafe { vector.set_len(written) };
         }
         gained
@@ -481,13 +479,23 @@ impl<'a> ForecastView<'a> {
             };
             let lookup = MaskLookup::new(self.mask(index).expect("run index is a horizon"));
             let (first, last) = self.interval(index);
-            outputs.route(run, move |event| {
-                let (inside, bit) = lookup.probe(event);
-                let judged = inside & u64::from((event.t >= first) & (event.t <= last));
-                // Off-sensor and out-of-order events are rare, so this branch is predicted and
-                // the common path writes two cursors instead of three.
-                (judged != 0).then_some(bit ^ inversion)
-            });
+            // Bits first, then copies: each event is written once, and judged words of one
+            // fate are copied whole.
+            for chunk in run.chunks(64) {
+                let (mut keep, mut judged) = (0u64, 0u64);
+                for (position, event) in chunk.iter().enumerate() {
+                    let (inside, bit) = lookup.probe(event);
+                    let judged_bit = inside & u64::from((event.t >= first) & (event.t <= last));
+                    judged |= judged_bit << position;
+                    keep |= (judged_bit & (bit ^ inversion)) << position;
+                }
+                let all = u64::MAX >> (64 - chunk.len());
+                outputs.push_selected(KEPT, chunk, keep);
+                outputs.push_selected(SUPPRESSED, chunk, judged & !keep);
+                if judged != all {
+                    outputs.push_selected(UNJUDGED, chunk, all & !judged);
+                }
+            }
         });
         let [kept, suppressed, unjudged] = outputs.finish();
         GateCounts {
