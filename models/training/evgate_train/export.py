@@ -106,12 +106,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--height", type=int, default=272, help="padded input height (multiple of 16)")
     parser.add_argument("--width", type=int, default=352, help="padded input width (multiple of 16)")
     parser.add_argument("--output", type=Path, required=True, help="where to write the .onnx file")
+    parser.add_argument(
+        "--train-steps",
+        type=int,
+        help="optimiser steps to record instead of the checkpoint's own count: a run started with "
+        "--init-from counts from 0, so a fine-tuned chain records the sum of its runs' steps",
+    )
     args = parser.parse_args(argv)
+    if args.train_steps is not None and args.train_steps < 0:
+        parser.error(f"--train-steps {args.train_steps}: expected a non-negative number of steps")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     if args.checkpoint:
         checkpoint = load_checkpoint(args.checkpoint)
         network = checkpoint.network
-        manifest, steps = checkpoint.manifest_sha256, checkpoint.step
+        manifest = checkpoint.manifest_sha256
+        steps = checkpoint.step if args.train_steps is None else args.train_steps
     else:
         torch.manual_seed(0)
         network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
