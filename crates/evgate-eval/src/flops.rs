@@ -1,6 +1,7 @@
-//! The network's size figures (parameters, GFLOPs at 346×260 and 640×480) from the training
-//! code's FLOP counter (`python -m evgate_train.flops --output ...`), attached to the report's
-//! model methods by size class (and ATC variant, when the table states it).
+//! The network's GFLOPs at 346×260 and 640×480 from the training code's FLOP counter
+//! (`python -m evgate_train.flops --output ...`), attached to the report's model methods by
+//! size class (and ATC variant, when the table states it) where the row's parameter count is
+//! the model file's: a row of another architecture of the same size class is not used.
 
 use std::path::{Path, PathBuf};
 
@@ -67,8 +68,11 @@ impl FlopTable {
             .or_else(|| of_size().find(|r| r.atc.is_none()))
     }
 
-    /// Sets parameters and GFLOPs of every model method the table has a row for.
-    pub fn apply(&self, report: &mut Report, source: &Path) {
+    /// Sets the GFLOPs of every model method the table has a matching row for (and the
+    /// parameter count where the model's is not known yet); returns the names of the models
+    /// whose row has another parameter count (left without GFLOPs).
+    pub fn apply(&self, report: &mut Report, source: &Path) -> Vec<String> {
+        let mut mismatched = Vec::new();
         for method in &mut report.methods {
             let Some(model) = method.model.as_mut() else {
                 continue;
@@ -76,11 +80,19 @@ impl FlopTable {
             let Some(row) = self.row(&model.size, &model.atc) else {
                 continue;
             };
+            match (model.parameters, row.parameters) {
+                (Some(counted), Some(listed)) if counted != listed => {
+                    mismatched.push(method.name.clone());
+                    continue;
+                }
+                (None, listed) => model.parameters = listed,
+                _ => {}
+            }
             method.gflops = row.gflops_640x480;
             method.gflops_346x260 = row.gflops_346x260;
-            model.parameters = row.parameters;
             model.size_figures_from = Some(source.to_path_buf());
         }
+        mismatched
     }
 }
 

@@ -23,6 +23,7 @@ use crate::method::{MethodInfo, MethodKind};
 use crate::oms::{
     event_presence, normalised_response, oms_mask, threshold_response, OmsParameters,
 };
+use crate::onnx_parameters::{onnx_parameters, OnnxParametersError};
 use crate::recording::{GroundTruth, Recording};
 use crate::report::{OmsSweepResult, PresetResult, Report, SequenceResult, SweepScores};
 use crate::segmentation::{PixelConfusion, SegmentationError};
@@ -80,6 +81,8 @@ pub enum HarnessError {
     },
     #[error("no sequence was evaluated")]
     NothingEvaluated,
+    #[error(transparent)]
+    Parameters(#[from] OnnxParametersError),
 }
 
 /// A loaded network and the name it is reported under.
@@ -138,13 +141,17 @@ impl Evaluation {
         ];
         for (index, model) in models.iter().enumerate() {
             let metadata = model.runtime.metadata();
-            methods.push(MethodInfo::model(
+            let mut method = MethodInfo::model(
                 index,
                 &model.label,
                 model.runtime.model_path(),
                 metadata,
                 &config,
-            ));
+            );
+            if let Some(info) = method.model.as_mut() {
+                info.parameters = Some(onnx_parameters(model.runtime.model_path())?);
+            }
+            methods.push(method);
         }
         methods.push(MethodInfo::oracle(&config));
         let event_bins = LogBins {

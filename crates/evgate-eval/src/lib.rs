@@ -21,6 +21,7 @@ pub mod markdown;
 pub mod method;
 pub mod model_tables;
 pub mod oms;
+pub mod onnx_parameters;
 pub mod output;
 pub mod plot;
 pub mod recording;

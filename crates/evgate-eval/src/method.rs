@@ -40,10 +40,10 @@ pub struct ModelInfo {
     #[serde(default = "trained_by_default")]
     pub trained: bool,
     pub path: Option<std::path::PathBuf>,
-    /// From the FLOP table, by size class.
+    /// Counted in the ONNX file (the elements of its initializers).
     #[serde(default)]
     pub parameters: Option<u64>,
-    /// The FLOP table the parameters and GFLOPs come from.
+    /// The FLOP table the GFLOPs come from (only when its row has this parameter count).
     #[serde(default)]
     pub size_figures_from: Option<std::path::PathBuf>,
 }

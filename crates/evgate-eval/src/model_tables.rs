@@ -163,11 +163,12 @@ fn sizes(report: &Report, with_masks: &[bool]) -> String {
         .collect();
     let _ = writeln!(
         out,
-        "Parameters and GFLOPs per size class (one window, one horizon) from {}; runtime is the \
-         median ONNX Runtime call per window on this machine; mIoU and R@0.5 at t + {headline} \
-         ms over all recordings with masks.\n",
+        "Parameters counted in each ONNX file; GFLOPs (one window, one horizon) from {}, only \
+         where the table's row for the size has the model's parameter count (\"–\": the table \
+         describes another architecture); runtime is the median ONNX Runtime call per window on \
+         this machine; mIoU and R@0.5 at t + {headline} ms over all recordings with masks.\n",
         if sources.is_empty() {
-            "no FLOP table (pass `--model-flops`)".to_owned()
+            "no matching FLOP table row (`--model-flops`)".to_owned()
         } else {
             sources.join(", ")
         }
@@ -309,13 +310,23 @@ mod tests {
         let mut report = with_models(&[
             ("L", "L", "position-aware", true),
             ("XS", "XS", "position-aware", true),
+            ("S", "S", "none", true),
         ]);
         let table: FlopTable = serde_json::from_str(
             r#"{"models": [{"size": "XS", "parameters": 558793, "gflops-346x260": 1.295,
-                "gflops-640x480": 4.408}]}"#,
+                "gflops-640x480": 4.408}, {"size": "S", "parameters": 2227653,
+                "gflops-346x260": 5.037, "gflops-640x480": 16.67}]}"#,
         )
         .unwrap();
-        table.apply(&mut report, Path::new("models/reports/flops.json"));
+        let counted = |name: &str, report: &mut Report, parameters: u64| {
+            let method = report.methods.iter_mut().find(|m| m.name == name).unwrap();
+            method.model.as_mut().unwrap().parameters = Some(parameters);
+        };
+        counted("model:XS", &mut report, 558_793);
+        // The S file is another architecture than the table's S row: no GFLOPs from it.
+        counted("model:S", &mut report, 325_880);
+        let mismatched = table.apply(&mut report, Path::new("models/reports/flops.json"));
+        assert_eq!(mismatched, ["model:S"]);
         let text = sizes(&report, &[true, true]);
         let xs = text.find("| `model:XS`").unwrap();
         let l = text.find("| `model:L`").unwrap();

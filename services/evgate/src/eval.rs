@@ -227,7 +227,15 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             .find(|p| p.is_file())
     });
     if let Some(path) = flops_path {
-        FlopTable::read(&path)?.apply(&mut report, &path);
+        let mismatched = FlopTable::read(&path)?.apply(&mut report, &path);
+        if !mismatched.is_empty() {
+            tracing::warn!(
+                table = %path.display(),
+                models = ?mismatched,
+                "the FLOP table's row for these models' size has another parameter count (another \
+                 architecture): their GFLOPs are left out"
+            );
+        }
     }
     let written = write_report(&report, &args.report)?;
     if args.json {
