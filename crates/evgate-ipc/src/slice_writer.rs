@@ -39,9 +39,10 @@ impl<'a, T: Copy> SliceWriter<'a, T> {
         let room = self.slots.len() - self.written;
         let fitting = items.len().min(room);
         let source = &items[..fitting];
-        // SAFETY: `MaybeUninit<T>` has the layout of `T`, so a slice of `T` reads as a slice
-        // of initialised `MaybeUninit<T>`.
-        let source: &[MaybeUninit<T>] = unsafe { std::mem::transmute(source) };
+        // SAFETY: `MaybeUninit<T>` has the layout of `T`, so the items read as initialised
+        // `MaybeUninit<T>` values for as long as `items` is borrowed.
+        let source: &[MaybeUninit<T>] =
+            unsafe { std::slice::from_raw_parts(source.as_ptr().cast(), source.len()) };
         self.slots[self.written..self.written + fitting].copy_from_slice(source);
         self.written += fitting;
         self.overflowed += items.len() - fitting;
