@@ -163,12 +163,15 @@ fn sizes(report: &Report, with_masks: &[bool]) -> String {
         .collect();
     let _ = writeln!(
         out,
-        "Parameters counted in each ONNX file; GFLOPs (one window, one horizon) from {}, only \
-         where the table's row for the size has the model's parameter count (\"–\": the table \
-         describes another architecture); runtime is the median ONNX Runtime call per window on \
-         this machine; mIoU and R@0.5 at t + {headline} ms over all recordings with masks.\n",
+        "Parameters counted in each ONNX file. GFLOPs (one window, one horizon) from {}, where \
+         the table's row for the size has the model's parameter count; \"–\" where it describes \
+         another architecture or no table was given (`--model-flops`). Runtime is the median \
+         ONNX Runtime call per window on this machine; mIoU and R@0.5 at t + {headline} ms over \
+         all recordings with masks.\n",
         if sources.is_empty() {
-            "no matching FLOP table row (`--model-flops`)".to_owned()
+            "the FLOP table".to_owned()
+        } else {
+            sources.join(", ")
         } else {
             sources.join(", ")
         }
