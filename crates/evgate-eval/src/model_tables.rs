@@ -172,8 +172,6 @@ fn sizes(report: &Report, with_masks: &[bool]) -> String {
             "the FLOP table".to_owned()
         } else {
             sources.join(", ")
-        } else {
-            sources.join(", ")
         }
     );
     out += &header(
