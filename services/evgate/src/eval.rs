@@ -59,7 +59,8 @@ pub struct EvalArgs {
     #[arg(long = "model", value_name = "[NAME=]PATH")]
     pub models: Vec<ModelSpec>,
     /// Also evaluate every .onnx file of this folder (named by file stem, after the --model
-    /// ones; files already given are skipped), e.g. models/ablation.
+    /// ones; files already given and copies of a loaded model are skipped), e.g.
+    /// models/ablation.
     #[arg(long, value_name = "DIR")]
     pub ablation_models: Option<PathBuf>,
     /// Evaluate the baselines only (no-forecast and linear then start from the ground truth).
@@ -88,9 +89,9 @@ pub struct EvalArgs {
     /// ONNX Runtime threads per operator.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
-    /// Parameters and GFLOPs per model size (the JSON of `python -m evgate_train.flops`) for
-    /// tables III and VII; default: models/reports/flops.json, else
-    /// models/training/runs/flops.json, when present.
+    /// GFLOPs per model size (the JSON of `python -m evgate_train.flops`) for tables III and
+    /// VII, used where a row's parameter count is the model file's; default:
+    /// models/reports/flops.json, else models/training/runs/flops.json, when present.
     #[arg(long)]
     pub model_flops: Option<PathBuf>,
     /// Print the overall summary as JSON on stdout instead of text.
