@@ -25,7 +25,9 @@ use crate::oms::{
 };
 use crate::onnx_parameters::{onnx_parameters, OnnxParametersError};
 use crate::recording::{GroundTruth, Recording};
-use crate::report::{OmsSweepResult, PresetResult, Report, SequenceResult, SweepScores};
+use crate::report::{
+    ModelNotRun, OmsSweepResult, PresetResult, Report, SequenceResult, SweepScores,
+};
 use crate::segmentation::{PixelConfusion, SegmentationError};
 use crate::summary::{HorizonAccumulator, Mean, MethodAccumulator, MethodSummary};
 
@@ -37,18 +39,6 @@ pub enum HarnessError {
     Model {
         path: PathBuf,
         source: Box<ModelError>,
-    },
-    #[error(
-        "model {model} expects a {expected} input but {sequence} has a {sensor} sensor (padded to \
-         {padded}, larger than the model's input); export the model for at least {padded} \
-         (models/training: python -m evgate_train.export --height H --width W)"
-    )]
-    InputSize {
-        model: String,
-        sequence: String,
-        sensor: SensorSize,
-        padded: SensorSize,
-        expected: SensorSize,
     },
     #[error("{sequence}: voxel grid: {source}")]
     Voxel {
@@ -205,17 +195,22 @@ impl Evaluation {
             sequence: name.to_owned(),
             source,
         })?;
+        // A model exported for a smaller input than this sensor's cannot see it: it sits this
+        // recording out (and so do the baselines built on the first model's mask).
+        let mut models_not_run = Vec::new();
+        let mut runs_here = Vec::with_capacity(self.models.len());
         for model in &mut self.models {
-            let expected = model.runtime.input_size();
+            let input = model.runtime.input_size();
             let padded = voxel.padded();
-            if expected.width < padded.width || expected.height < padded.height {
-                return Err(HarnessError::InputSize {
-                    model: model.label.clone(),
-                    sequence: name.to_owned(),
-                    sensor: size,
-                    padded,
-                    expected,
+            let fits = input.width >= padded.width && input.height >= padded.height;
+            runs_here.push(fits);
+            if !fits {
+                models_not_run.push(ModelNotRun {
+                    method: format!("model:{}", model.label),
+                    model_input: input,
+                    padded_sensor: padded,
                 });
+                continue;
             }
             model
                 .runtime
@@ -273,7 +268,11 @@ impl Evaluation {
             voxel.accumulate(window, span);
             voxel.normalise();
             let mut model_outputs = Vec::with_capacity(self.models.len());
-            for model in &mut self.models {
+            for (model, &runs) in self.models.iter_mut().zip(&runs_here) {
+                if !runs {
+                    model_outputs.push(None);
+                    continue;
+                }
                 let input = fit_to_model(&voxel, model.runtime.input_size());
                 let output =
                     model
@@ -285,11 +284,11 @@ impl Evaluation {
                         })?;
                 let stride = output.width();
                 let crop = |logits: &[f32]| crop_logits(logits, stride, size);
-                model_outputs.push(MethodOutput {
+                model_outputs.push(Some(MethodOutput {
                     current: crop(output.mask_logits()),
                     futures: output.future_mask_logits().map(crop).collect(),
                     runtime: output.inference_time(),
-                });
+                }));
             }
 
             let now = recording.truth_at(reference_us);
@@ -310,7 +309,8 @@ impl Evaluation {
             };
 
             let current_source = match (model_outputs.first(), now) {
-                (Some(output), _) => Some((output.current.clone(), output.runtime)),
+                (Some(Some(output)), _) => Some((output.current.clone(), output.runtime)),
+                (Some(None), _) => None,
                 (None, Some(now)) => Some((to_mask(now), Duration::ZERO)),
                 (None, None) => None,
             };
@@ -356,8 +356,7 @@ impl Evaluation {
                         }
                     }),
                     MethodKind::Model(index) => {
-                        let output = &model_outputs[index];
-                        Some(MethodOutput {
+                        model_outputs[index].as_ref().map(|output| MethodOutput {
                             current: output.current.clone(),
                             futures: output.futures.clone(),
                             runtime: output.runtime,
@@ -480,6 +479,7 @@ impl Evaluation {
             sensor: size,
             references: references.len(),
             ground_truth,
+            models_not_run,
             methods,
         });
         Ok(self.sequences.last().expect("just pushed"))
@@ -880,6 +880,22 @@ mod tests {
         assert_eq!(frames_at_100, 6);
         assert_eq!(report.oms_sweep.settings.len(), 4);
         assert!(report.oms_sweep.best.is_some());
+    }
+
+    #[test]
+    fn models_left_out_of_a_recording_are_listed_in_the_report() {
+        let mut report = run(small_config());
+        assert!(report.sequences[0].models_not_run.is_empty());
+        report.sequences[0].models_not_run.push(ModelNotRun {
+            method: "model:S".to_owned(),
+            model_input: SensorSize::new(352, 272),
+            padded_sensor: SensorSize::new(640, 480),
+        });
+        let markdown = crate::markdown::render(&report, &[]);
+        assert!(
+            markdown.contains("`model:S` on slide-0001 (640x480 > 352x272)"),
+            "{markdown}"
+        );
     }
 
     #[test]

@@ -141,6 +141,28 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
              masks reads \"{NO_MASKS}\" where no recording of a column has masks.\n"
         );
     }
+    let not_run: Vec<String> = report
+        .sequences
+        .iter()
+        .flat_map(|s| {
+            s.models_not_run.iter().map(move |m| {
+                format!(
+                    "`{}` on {} ({} > {})",
+                    m.method, s.name, m.padded_sensor, m.model_input
+                )
+            })
+        })
+        .collect();
+    if !not_run.is_empty() {
+        let _ = writeln!(
+            out,
+            "Not evaluated, the recording's sensor (padded to multiples of 16) being larger than \
+             the model's input: {}. The averages of these models, and of no-forecast and linear \
+             where the first model sat out, leave those recordings out (export a model for the \
+             size to include them).\n",
+            not_run.join(", ")
+        );
+    }
     let _ = writeln!(out, "Methods:\n");
     for method in &report.methods {
         let _ = writeln!(out, "- `{}`: {}", method.name, method.description);

@@ -25,7 +25,20 @@ pub struct SequenceResult {
     /// What the recording could be scored against; metrics needing more are `null`.
     #[serde(default = "GroundTruth::simulator")]
     pub ground_truth: GroundTruth,
+    /// Models that could not see this recording (its padded sensor exceeds their input); their
+    /// scores, and those of the baselines built on the first model's mask, leave it out.
+    #[serde(default)]
+    pub models_not_run: Vec<ModelNotRun>,
     pub methods: BTreeMap<String, MethodSummary>,
+}
+
+/// A model left out of one recording.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub struct ModelNotRun {
+    pub method: String,
+    pub model_input: SensorSize,
+    pub padded_sensor: SensorSize,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -210,6 +210,16 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             path.display()
         ));
         let result = evaluation.evaluate(&recording, || bar.inc(1))?;
+        for left_out in &result.models_not_run {
+            tracing::warn!(
+                sequence = %result.name,
+                model = %left_out.method,
+                sensor = %left_out.padded_sensor,
+                model_input = %left_out.model_input,
+                "the recording is larger than the model's input: the model (and the baselines on \
+                 its mask, if it is the first) sit this recording out"
+            );
+        }
         tracing::info!(
             sequence = %result.name,
             preset = %result.preset,
