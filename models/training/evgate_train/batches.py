@@ -53,6 +53,7 @@ class ChunkSampler:
         augment: bool,
         seed: int,
         object_crop_share: float = 0.8,
+        flow_at_arrival: bool = False,
     ):
         self.sequences = [
             s for s in sequences if len(s.ref_ts) >= chunk_windows and min(s.width, s.height) >= crop_size
@@ -67,6 +68,7 @@ class ChunkSampler:
         self.max_events = max_events
         self.augment = augment
         self.object_crop_share = object_crop_share
+        self.flow_at_arrival = flow_at_arrival
         self.rng = np.random.default_rng(seed)
         # Full-frame voxel grids by (sequence, reference): the same windows recur across
         # thousands of steps, and rebuilding a grid from events costs more than a step's forward pass.
@@ -87,7 +89,13 @@ class ChunkSampler:
         return [
             apply(
                 training_window(
-                    sequence, start + i, crop, self.max_events, self.rng, self._voxel(index, start + i)
+                    sequence,
+                    start + i,
+                    crop,
+                    self.max_events,
+                    self.rng,
+                    self._voxel(index, start + i),
+                    self.flow_at_arrival,
                 ),
                 augmentation,
                 self.crop_size,

@@ -104,6 +104,13 @@ def build_parser() -> argparse.ArgumentParser:
         "ramp linearly from 0 to their weights over these steps, so the current mask is learnt first",
     )
     parser.add_argument("--no-augment", action="store_true", help="disable flips and polarity inversion")
+    parser.add_argument(
+        "--flow-target",
+        default="forward",
+        choices=("forward", "arrival"),
+        help="flow L1 target: the simulator's forward flow (defined where a pixel leaves), or "
+        "'arrival': inside each object's future footprint its mean flow, which backward warping needs",
+    )
     parser.add_argument("--seed", type=int, default=7, help="seed of weights, sampling and augmentation")
     parser.add_argument(
         "--threads",
@@ -171,7 +178,13 @@ def train(args: argparse.Namespace) -> Path:
     # Resumed runs reseed by step so the data stream continues instead of repeating.
     seed_everything(args.seed + start_step)
     sampler = ChunkSampler(
-        sequences, args.chunk_windows, args.crop, args.max_contrast_events, not args.no_augment, args.seed + start_step
+        sequences,
+        args.chunk_windows,
+        args.crop,
+        args.max_contrast_events,
+        not args.no_augment,
+        args.seed + start_step,
+        flow_at_arrival=args.flow_target == "arrival",
     )
     weights = LossWeights(
         dice=args.dice_weight,

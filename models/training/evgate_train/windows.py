@@ -52,10 +52,44 @@ def reference_voxel(sequence: Sequence, reference: int) -> np.ndarray:
     )
 
 
+def arrival_flow(
+    sequence: Sequence, reference: int, grid_index: int | None, rows: slice, cols: slice, flow: np.ndarray,
+    flow_valid: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Backward warping reads the flow at the pixel an object reaches, but the simulator's flow
+    is defined at the pixel it leaves: ahead of a moving object it is the background's. Inside
+    each object's footprint at t + h this returns the object's mean flow at t (a rigid
+    translation); elsewhere, and without a mask at t, the simulator's flow."""
+    if grid_index is None:
+        return flow, flow_valid
+    ids_now = sequence.masks[grid_index]
+    future_ids = sequence.future_mask[reference, :, rows, cols]
+    flow, flow_valid = flow.copy(), flow_valid.copy()
+    for k in range(future_ids.shape[0]):
+        for object_id in np.unique(future_ids[k]):
+            if object_id == 0:
+                continue
+            vectors = sequence.future_flow[reference, k][ids_now == object_id].astype(np.float32)
+            vectors = vectors[np.isfinite(vectors).all(axis=1)]
+            if len(vectors) == 0:
+                continue
+            target = future_ids[k] == object_id
+            flow[k][:, target] = vectors.mean(axis=0)[:, None]
+            flow_valid[k][target] = True
+    return flow, flow_valid
+
+
 def training_window(
-    sequence: Sequence, reference: int, crop: Crop, max_events: int, rng: np.random.Generator, full: np.ndarray
+    sequence: Sequence,
+    reference: int,
+    crop: Crop,
+    max_events: int,
+    rng: np.random.Generator,
+    full: np.ndarray,
+    flow_at_arrival: bool = False,
 ) -> TrainingWindow:
-    """`full` is `reference_voxel(sequence, reference)`, passed in so callers can cache it."""
+    """`full` is `reference_voxel(sequence, reference)`, passed in so callers can cache it;
+    `flow_at_arrival` replaces the flow target inside objects' future footprints (`arrival_flow`)."""
     t_end = int(sequence.ref_ts[reference])
     rows = slice(crop.top, crop.top + crop.size)
     cols = slice(crop.left, crop.left + crop.size)
@@ -68,6 +102,8 @@ def training_window(
     horizons_us = sequence.horizon_us[reference]
     flow = sequence.future_flow[reference, :, rows, cols, :].astype(np.float32).transpose(0, 3, 1, 2)
     flow_valid = np.isfinite(flow).all(axis=1)
+    if flow_at_arrival:
+        flow, flow_valid = arrival_flow(sequence, reference, grid_index, rows, cols, flow, flow_valid)
     events = []
     for horizon in horizons_us:
         future = sequence.event_range(t_end, t_end + int(horizon))

@@ -118,3 +118,24 @@ def test_forecast_ramp_scales_only_the_forecast_terms():
     assert (start.future_mask, start.flow, start.contrast) == (0.0, 0.0, 0.0)
     assert middle.contrast == pytest.approx(0.5) and middle.future_mask == pytest.approx(0.5)
     assert done == weights and (start.dice, start.positive) == (0.5, 5.0)
+
+
+def test_arrival_flow_target_moves_the_whole_future_footprint(synthetic_dir):
+    sequence = load_sequence(synthetic_dir / "slide-0.npz")
+    crop = Crop(left=0, top=0, size=48)
+    voxel = reference_voxel(sequence, 2)
+    forward = training_window(sequence, 2, crop, 100, np.random.default_rng(0), voxel)
+    arrival = training_window(sequence, 2, crop, 100, np.random.default_rng(0), voxel, flow_at_arrival=True)
+    # The square slides right: the pixels it reaches by t + h (future mask, not mask at t) carry
+    # the background's forward flow, but its own flow as the arrival target.
+    k = int(np.argmax(arrival.horizons_ms))
+    reached = (arrival.future_mask[k] > 0) & (arrival.mask == 0)
+    assert reached.any()
+    assert (np.abs(forward.future_flow[k, 0][reached]) < 1e-3).all() or not forward.flow_valid[k][reached].all()
+    object_dx = forward.future_flow[k, 0][arrival.mask > 0].mean()
+    assert object_dx > 0.5
+    np.testing.assert_allclose(arrival.future_flow[k, 0][reached], object_dx, rtol=0.05)
+    assert arrival.flow_valid[k][reached].all()
+    # Outside every future footprint the target is unchanged.
+    outside = arrival.future_mask[k] == 0
+    np.testing.assert_array_equal(arrival.future_flow[k][:, outside], forward.future_flow[k][:, outside])
