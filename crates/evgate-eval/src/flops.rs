@@ -1,7 +1,10 @@
 //! The network's GFLOPs at 346×260 and 640×480 from the training code's FLOP counter
 //! (`python -m evgate_train.flops --output ...`), attached to the report's model methods by
 //! size class (and ATC variant, when the table states it) where the row's parameter count is
-//! the model file's: a row of another architecture of the same size class is not used.
+//! the model file's: a row of another architecture of the same size class is not used. The
+//! table counts the PyTorch module, whose batch-norm parameters the ONNX export folds into the
+//! convolutions, so counts within `FOLDED_PARAMETER_TOLERANCE` of each other are the same
+//! architecture.
 
 use std::path::{Path, PathBuf};
 
@@ -26,6 +29,10 @@ pub enum FlopTableError {
         source: serde_json::Error,
     },
 }
+
+/// Largest relative difference between the table's and the file's parameter counts that
+/// batch-norm folding explains (the S model loses 0.2 %; a variant without ATC differs by 3 %).
+pub const FOLDED_PARAMETER_TOLERANCE: f64 = 0.01;
 
 /// One size class (optionally one ATC variant) of the table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -81,7 +88,7 @@ impl FlopTable {
                 continue;
             };
             match (model.parameters, row.parameters) {
-                (Some(counted), Some(listed)) if counted != listed => {
+                (Some(counted), Some(listed)) if !same_architecture(counted, listed) => {
                     mismatched.push(method.name.clone());
                     continue;
                 }
@@ -94,6 +101,11 @@ impl FlopTable {
         }
         mismatched
     }
+}
+
+fn same_architecture(counted_in_file: u64, listed: u64) -> bool {
+    let difference = counted_in_file.abs_diff(listed) as f64;
+    difference <= FOLDED_PARAMETER_TOLERANCE * listed.max(1) as f64
 }
 
 #[cfg(test)]
@@ -119,6 +131,14 @@ mod tests {
             Some(4.408)
         );
         assert!(table.row("L", "none").is_none());
+    }
+
+    #[test]
+    fn folded_batch_norm_counts_match_and_other_architectures_do_not() {
+        assert!(same_architecture(336_536, 337_144));
+        assert!(same_architecture(337_144, 337_144));
+        assert!(!same_architecture(325_880, 337_144));
+        assert!(!same_architecture(2_227_653, 337_144));
     }
 
     #[test]

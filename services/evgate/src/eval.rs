@@ -90,7 +90,8 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
     /// GFLOPs per model size (the JSON of `python -m evgate_train.flops`) for tables III and
-    /// VII, used where a row's parameter count is the model file's; default:
+    /// VII, used where a row's parameter count is the model file's (within the 1 % that folded
+    /// batch norm explains); default:
     /// models/reports/flops.json, else models/training/runs/flops.json, when present.
     #[arg(long)]
     pub model_flops: Option<PathBuf>,
