@@ -296,10 +296,14 @@ fn non_zero_deviation(cell: f32, mean: f64) -> f64 {
     }
 }
 
-/// +1 for ON, −1 for OFF without a branch.
+/// +1 for ON, −1 for OFF: 1.0 with the sign bit set for OFF. The arithmetic form
+/// `f32::from(on) * 2.0 - 1.0` was compiled into a branch on the polarity, which real and
+/// synthetic streams alike leave unpredictable (see BENCHMARKS.md, "Core kernels"); the sign
+/// bit form compiles to a table load.
 #[inline(always)]
 fn polarity_value(event: &Event) -> f32 {
-    f32::from(u8::from(event.polarity != 0)) * 2.0 - 1.0
+    const ONE_BITS: u32 = 0x3f80_0000;
+    f32::from_bits(ONE_BITS | (u32::from(event.polarity == 0) << 31))
 }
 
 #[cfg(test)]
@@ -331,6 +335,12 @@ mod tests {
         let at = |bin: usize, x: usize, y: usize| grid.as_slice()[bin * plane + y * 32 + x];
         assert_eq!((at(0, 4, 2), at(1, 4, 2), at(2, 4, 2)), (0.5, 0.5, 0.0));
         assert_eq!((at(0, 5, 2), at(1, 5, 2), at(2, 5, 2)), (0.0, 0.0, -1.0));
+    }
+
+    #[test]
+    fn polarity_values_are_plus_and_minus_one() {
+        assert_eq!(polarity_value(&Event::new(0, 0, 0, true)), 1.0);
+        assert_eq!(polarity_value(&Event::new(0, 0, 0, false)), -1.0);
     }
 
     #[test]
