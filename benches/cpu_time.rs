@@ -93,3 +93,26 @@ impl ValueFormatter for CpuNanosFormatter {
         "ns"
     }
 }
+
+/// `criterion_main!` for a bench function generic over the measurement, run twice: under wall
+/// time as group `$wall_group`, and under the thread's CPU time as group `$cpu_group`.
+#[macro_export]
+macro_rules! wall_and_cpu_time_main {
+    ($bench:ident, $wall_group:literal, $cpu_group:literal) => {
+        fn wall_time(criterion: &mut criterion::Criterion) {
+            $bench(criterion, $wall_group);
+        }
+
+        fn cpu_time(criterion: &mut criterion::Criterion<cpu_time::ThreadCpuTime>) {
+            $bench(criterion, $cpu_group);
+        }
+
+        criterion::criterion_group!(wall, wall_time);
+        criterion::criterion_group!(
+            name = cpu;
+            config = criterion::Criterion::default().with_measurement(cpu_time::ThreadCpuTime);
+            targets = cpu_time
+        );
+        criterion::criterion_main!(wall, cpu);
+    };
+}

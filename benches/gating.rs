@@ -4,7 +4,7 @@
 mod cpu_time;
 
 use criterion::measurement::Measurement;
-use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use criterion::{black_box, Criterion, Throughput};
 use evgate_core::{keep_bitmap, partition, BitMask, Event, ForecastView, GateMode, SensorSize};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -99,18 +99,4 @@ fn gating<M: Measurement>(criterion: &mut Criterion<M>, group_name: &str) {
     group.finish();
 }
 
-fn wall_time(criterion: &mut Criterion) {
-    gating(criterion, "gate");
-}
-
-fn cpu_time(criterion: &mut Criterion<cpu_time::ThreadCpuTime>) {
-    gating(criterion, "gate-cpu");
-}
-
-criterion_group!(wall, wall_time);
-criterion_group!(
-    name = cpu;
-    config = Criterion::default().with_measurement(cpu_time::ThreadCpuTime);
-    targets = cpu_time
-);
-criterion_main!(wall, cpu);
+wall_and_cpu_time_main!(gating, "gate", "gate-cpu");

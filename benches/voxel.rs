@@ -5,7 +5,7 @@
 mod cpu_time;
 
 use criterion::measurement::Measurement;
-use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use criterion::{black_box, BenchmarkId, Criterion, Throughput};
 use evgate_core::{Event, SensorSize, TimeSpan, TimeWindow, VoxelGrid, WindowsByDuration};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -158,18 +158,4 @@ fn voxelisation<M: Measurement>(criterion: &mut Criterion<M>, group_name: &str) 
     group.finish();
 }
 
-fn wall_time(criterion: &mut Criterion) {
-    voxelisation(criterion, "voxelise");
-}
-
-fn cpu_time(criterion: &mut Criterion<cpu_time::ThreadCpuTime>) {
-    voxelisation(criterion, "voxelise-cpu");
-}
-
-criterion_group!(wall, wall_time);
-criterion_group!(
-    name = cpu;
-    config = Criterion::default().with_measurement(cpu_time::ThreadCpuTime);
-    targets = cpu_time
-);
-criterion_main!(wall, cpu);
+wall_and_cpu_time_main!(voxelisation, "voxelise", "voxelise-cpu");
