@@ -280,7 +280,8 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
         &format!("suite {} ({} sequences)", args.scale, plan.len()),
     );
     let started = std::time::Instant::now();
-    let mut entries = Vec::with_capacity(plan.len());
+    let sequence_count = plan.len();
+    let mut entries = Vec::with_capacity(sequence_count);
     let mut done_before = 0i64;
     for entry in plan {
         bar.set_message(entry.name.clone());
@@ -295,6 +296,17 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
             bar.set_position((done_before + done) as u64);
         })?;
         done_before += entry.duration_us + entry.duration_us / 4;
+        // A line per sequence, so the progress shows where the bar is not drawn (a log file).
+        bar.suspend(|| {
+            tracing::info!(
+                sequence = %entry.name,
+                done = entries.len() + 1,
+                of = sequence_count,
+                events = summary.events,
+                wall_s = format!("{:.1}", summary.wall_s),
+                "simulated"
+            )
+        });
         let files = summary
             .files
             .iter()
