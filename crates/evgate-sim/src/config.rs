@@ -59,3 +59,20 @@ pub struct SimConfig {
     #[serde(default)]
     pub events: EventModel,
 }
+
+impl SimConfig {
+    /// The same camera with its resolution divided by `divisor` and the same field of view:
+    /// small sensors keep tests and quick checks fast while the scene stays the preset's.
+    pub fn at_reduced_resolution(mut self, divisor: u16) -> Self {
+        let k = self.intrinsics;
+        let scale = f32::from(divisor);
+        self.sensor = SensorSize::new(self.sensor.width / divisor, self.sensor.height / divisor);
+        self.intrinsics = Intrinsics {
+            fx: k.fx / scale,
+            fy: k.fy / scale,
+            cx: k.cx / scale,
+            cy: k.cy / scale,
+        };
+        self
+    }
+}

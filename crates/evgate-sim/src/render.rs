@@ -575,25 +575,15 @@ fn intersect_cuboid(half: Vec3, origin: Vec3, direction: Vec3) -> Option<LocalHi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::Intrinsics;
     use crate::preset::Preset;
     use crate::world::build_scene;
-    use evgate_core::SensorSize;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     #[test]
     fn rendering_whole_rows_matches_tracing_each_pixel_bit_for_bit() {
         for preset in [Preset::Boxes, Preset::Table, Preset::Driving] {
-            let mut config = preset.config();
-            let k = config.intrinsics;
-            config.sensor = SensorSize::new(config.sensor.width / 4, config.sensor.height / 4);
-            config.intrinsics = Intrinsics {
-                fx: k.fx / 4.0,
-                fy: k.fy / 4.0,
-                cx: k.cx / 4.0,
-                cy: k.cy / 4.0,
-            };
+            let config = preset.config().at_reduced_resolution(4);
             let scene = build_scene(&config, &mut ChaCha8Rng::seed_from_u64(4));
             let (width, height) = (config.sensor.width as usize, config.sensor.height as usize);
             for t_s in [0.0, 0.37, 1.3] {

@@ -2,8 +2,7 @@
 //! (`SUITE_VERSION`) stays valid only while the same configuration and seed give the same
 //! events and masks, so a speed-up must not change a bit of them.
 
-use evgate_core::SensorSize;
-use evgate_sim::{Intrinsics, Preset, Simulator, SUITE_VERSION};
+use evgate_sim::{Preset, Simulator, SUITE_VERSION};
 
 /// FNV-1a, 64 bit: a hash whose definition does not depend on the Rust version.
 struct Fnv1a(u64);
@@ -21,15 +20,7 @@ impl Fnv1a {
 }
 
 fn output_hash(preset: Preset, seed: u64, threads: usize) -> (usize, u64) {
-    let mut config = preset.config();
-    let k = config.intrinsics;
-    config.sensor = SensorSize::new(config.sensor.width / 3, config.sensor.height / 3);
-    config.intrinsics = Intrinsics {
-        fx: k.fx / 3.0,
-        fy: k.fy / 3.0,
-        cx: k.cx / 3.0,
-        cy: k.cy / 3.0,
-    };
+    let config = preset.config().at_reduced_resolution(3);
     let mut simulator = Simulator::new(config, seed).expect("valid config");
     simulator.set_threads(threads);
     let mut events = Vec::new();

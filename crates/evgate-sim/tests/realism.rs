@@ -1,20 +1,10 @@
 //! Realism checks of the simulator (issue 3, item 6), on small sensors so they run in seconds.
 
-use evgate_core::SensorSize;
-use evgate_sim::{EventModel, Intrinsics, LabelledEvent, Preset, SimConfig, Simulator};
+use evgate_sim::{EventModel, LabelledEvent, Preset, SimConfig, Simulator};
 
 /// The preset at a third of its resolution (same field of view).
 fn small(preset: Preset) -> SimConfig {
-    let mut config = preset.config();
-    let k = config.intrinsics;
-    config.sensor = SensorSize::new(config.sensor.width / 3, config.sensor.height / 3);
-    config.intrinsics = Intrinsics {
-        fx: k.fx / 3.0,
-        fy: k.fy / 3.0,
-        cx: k.cx / 3.0,
-        cy: k.cy / 3.0,
-    };
-    config
+    preset.config().at_reduced_resolution(3)
 }
 
 fn noiseless(mut config: SimConfig) -> SimConfig {
