@@ -1,24 +1,13 @@
 //! `evgate info` and `evgate convert` on a real recording, end to end through the binary.
 
-use std::process::Command;
+mod common;
+
+use common::evgate;
 
 const EVT3: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../../../shared/data/real/evt3_sample.raw"
 );
-
-fn evgate(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_evgate"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("evgate runs");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 fn json(text: &str) -> serde_json::Value {
     serde_json::from_str(text).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"))

@@ -1,25 +1,14 @@
 //! `evgate info` / `evgate convert` on a DSEC `events.h5` (the evgate-io fixture): decoded when
 //! built with `--features dsec`, a clear error naming the feature otherwise.
 
-use std::process::Command;
+mod common;
+
+use common::evgate;
 
 const DSEC: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../../crates/evgate-io/tests/fixtures/dsec_events.h5"
 );
-
-fn evgate(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_evgate"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("evgate runs");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 #[cfg(feature = "dsec")]
 #[test]

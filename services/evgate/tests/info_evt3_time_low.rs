@@ -1,7 +1,9 @@
 //! `evgate info --evt3-time-low carry-on-step-back` reproduces the reference decode's times of
 //! `evt3_sample.raw` (expelliarmus adds 4096 µs at each of its eleven TIME_LOW steps back).
 
-use std::process::Command;
+mod common;
+
+use common::evgate;
 
 const EVT3: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
@@ -9,16 +11,11 @@ const EVT3: &str = concat!(
 );
 
 fn info(extra: &[&str]) -> Result<serde_json::Value, String> {
-    let out = Command::new(env!("CARGO_BIN_EXE_evgate"))
-        .args(["info", EVT3, "--json"])
-        .args(extra)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("evgate runs");
-    if !out.status.success() {
-        return Err(String::from_utf8_lossy(&out.stderr).into_owned());
+    let (ok, stdout, stderr) = evgate(&[&["info", EVT3, "--json"], extra].concat());
+    if !ok {
+        return Err(stderr);
     }
-    Ok(serde_json::from_slice(&out.stdout).expect("JSON"))
+    Ok(serde_json::from_str(&stdout).expect("JSON"))
 }
 
 #[test]
