@@ -15,6 +15,10 @@ echo "== cargo clippy"
 cargo clippy --workspace --all-targets --features evgate/dsec -- -D warnings
 echo "== cargo build of the fuzz targets (fuzz/, its own workspace)"
 cargo build --manifest-path fuzz/Cargo.toml
+echo "== cargo build of the binaries the end-to-end tests start"
+# The same command as SERVICE_PACKAGES in tests/lib.rs: the tests' own build then finds them fresh
+# and never compiles or runs a build script from inside a test.
+cargo build --bins -p evgate -p evgate-gate -p evgate-infer -p evgate-ingest
 echo "== cargo test"
 cargo test --workspace --features evgate/dsec
 echo "== pytest (models/training)"

@@ -51,20 +51,29 @@ pub fn binary_directory() -> PathBuf {
         .to_path_buf()
 }
 
-/// Builds the binaries of `packages` with the profile of the tests (once per package and test
+/// The packages whose binaries the end-to-end tests start. scripts/test.sh builds exactly this
+/// set (same command, same features) before `cargo test`, so the build below finds everything
+/// fresh and compiles nothing while tests run: a build started from inside a test would resolve
+/// features differently from the test build and compile (and execute) build scripts anew.
+pub const SERVICE_PACKAGES: [&str; 4] = ["evgate", "evgate-gate", "evgate-infer", "evgate-ingest"];
+
+/// Builds the binaries of [`SERVICE_PACKAGES`] with the profile of the tests (once per test
 /// process; cargo itself skips up-to-date work) and returns the path of `binary`.
-pub fn binary(package: &str, binary: &str) -> Result<PathBuf, HarnessError> {
-    static BUILT: OnceLock<Mutex<Vec<String>>> = OnceLock::new();
-    let built = BUILT.get_or_init(|| Mutex::new(Vec::new()));
-    let mut built = built
+pub fn binary(binary: &str) -> Result<PathBuf, HarnessError> {
+    static BUILT: OnceLock<Mutex<bool>> = OnceLock::new();
+    let mut built = BUILT
+        .get_or_init(|| Mutex::new(false))
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner());
-    if !built.iter().any(|done| done == package) {
+    if !*built {
         let directory = binary_directory();
         let mut command = Command::new(env!("CARGO"));
         command
             .current_dir(workspace_root())
-            .args(["build", "-p", package]);
+            .args(["build", "--bins"]);
+        for package in SERVICE_PACKAGES {
+            command.args(["-p", package]);
+        }
         if directory.file_name().is_some_and(|name| name == "release") {
             command.arg("--release");
         }
@@ -74,11 +83,11 @@ pub fn binary(package: &str, binary: &str) -> Result<PathBuf, HarnessError> {
         })?;
         if !status.success() {
             return Err(HarnessError::Build {
-                packages: package.to_owned(),
+                packages: SERVICE_PACKAGES.join(" -p "),
                 status,
             });
         }
-        built.push(package.to_owned());
+        *built = true;
     }
     Ok(binary_directory().join(binary))
 }
@@ -90,7 +99,7 @@ pub fn start_service(
     names: &PipelineNames,
     args: &[&str],
 ) -> Result<Process, HarnessError> {
-    let program = binary(package, package)?;
+    let program = binary(package)?;
     let pipeline = [
         "--domain",
         names.domain.as_str(),

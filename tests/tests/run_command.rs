@@ -6,11 +6,9 @@ use evgate_e2e::{binary, u64_at, workspace_root, Process};
 
 const TIMEOUT: Duration = Duration::from_secs(120);
 
-/// Builds what `evgate run` starts: it finds the services next to its own executable.
+/// `evgate`, built with the services it starts (it finds them next to its own executable).
 fn evgate() -> std::path::PathBuf {
-    binary("evgate-ingest", "evgate-ingest").unwrap();
-    binary("evgate-gate", "evgate-gate").unwrap();
-    binary("evgate", "evgate").unwrap()
+    binary("evgate").unwrap()
 }
 
 #[test]
@@ -56,7 +54,6 @@ fn run_with_the_bundled_model_reports_inference_and_scores() {
         "{} is missing: it is the bundled model `evgate run` uses (or set EVGATE_TEST_MODEL)",
         model.display()
     );
-    binary("evgate-infer", "evgate-infer").unwrap();
     let mut run = Process::start(
         &evgate(),
         &[
