@@ -201,7 +201,7 @@ fn receive_one(output: &SliceSubscriber<Event, BatchHeader>, expected: usize) ->
 fn start_peer(peer: Peer, names: &PipelineNames) -> BenchResult<Process> {
     Ok(match peer {
         Peer::Gate => Process::start(
-            &binary("evgate-gate", "evgate-gate")?,
+            &binary("evgate-gate")?,
             &[
                 "--domain",
                 &names.domain,

@@ -112,7 +112,7 @@ fn sustained_throughput(total_events: u64, batch_events: usize) -> BenchResult<s
     )?;
     let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats)?;
     let mut gate = Process::start(
-        &binary("evgate-gate", "evgate-gate")?,
+        &binary("evgate-gate")?,
         &[
             "--domain",
             &names.domain,
@@ -205,7 +205,7 @@ fn service_memory() -> BenchResult<serde_json::Value> {
         names.camera.as_str(),
     ];
     let mut services = vec![Process::start(
-        &binary("evgate-gate", "evgate-gate")?,
+        &binary("evgate-gate")?,
         &[
             &common[..],
             &[
@@ -221,13 +221,13 @@ fn service_memory() -> BenchResult<serde_json::Value> {
     if with_infer {
         let model = model.display().to_string();
         services.push(Process::start(
-            &binary("evgate-infer", "evgate-infer")?,
+            &binary("evgate-infer")?,
             &[&common[..], &["--exit-at-end", "--model", &model]].concat(),
         )?);
     }
     let subscribers = services.len().to_string();
     services.push(Process::start(
-        &binary("evgate-ingest", "evgate-ingest")?,
+        &binary("evgate-ingest")?,
         &[
             &common[..],
             &[
