@@ -56,6 +56,7 @@ pub fn check_signature(
     let height = i64::from(metadata.input_height);
     let width = i64::from(metadata.input_width);
     let bins = i64::from(metadata.bins);
+    let (flow_height, flow_width) = metadata.flow_size();
     use Dimension::{Dynamic, Fixed};
     check_tensor(
         "input",
@@ -80,7 +81,13 @@ pub fn check_signature(
         "output",
         outputs,
         OUTPUT_FUTURE_FLOW,
-        &[Fixed(1), Dynamic, Fixed(2), Fixed(height), Fixed(width)],
+        &[
+            Fixed(1),
+            Dynamic,
+            Fixed(2),
+            Fixed(flow_height as i64),
+            Fixed(flow_width as i64),
+        ],
     )?;
     for stage in 0..STATE_COUNT {
         let shape = metadata.state_shape(stage).map(|d| Fixed(d as i64));

@@ -23,6 +23,12 @@ pub const KEY_MAX_HORIZON_MS: &str = "evgate.max-horizon-ms";
 pub const KEY_ATC: &str = "evgate.atc";
 pub const KEY_TRAIN_MANIFEST_SHA256: &str = "evgate.train-manifest-sha256";
 pub const KEY_TRAIN_STEPS: &str = "evgate.train-steps";
+/// Optional: the `future_flow` output is at 1/stride of the input size. Exports made before the
+/// key existed wrote the flow at full resolution, so an absent key means 1.
+pub const KEY_FLOW_STRIDE: &str = "evgate.flow-stride";
+
+/// Flow strides an export may declare: powers of two that divide every padded input side.
+pub const FLOW_STRIDES: [u16; 5] = [1, 2, 4, 8, 16];
 
 /// Every key the contract requires, in the order of docs/model-contract.md.
 pub const REQUIRED_KEYS: [&str; 11] = [
@@ -104,6 +110,8 @@ pub struct ModelMetadata {
     /// exporter writes `untrained`), which only runtime tests use.
     pub train_manifest_sha256: Option<String>,
     pub train_steps: u64,
+    /// `future_flow` is `input / flow_stride` high and wide (1 for exports without the key).
+    pub flow_stride: u16,
 }
 
 impl ModelMetadata {
@@ -122,6 +130,8 @@ impl ModelMetadata {
             atc: parse_atc(&value(KEY_ATC)?)?,
             train_manifest_sha256: parse_sha256(&value(KEY_TRAIN_MANIFEST_SHA256)?)?,
             train_steps: parse_count(KEY_TRAIN_STEPS, &value(KEY_TRAIN_STEPS)?)?,
+            flow_stride: lookup(KEY_FLOW_STRIDE)
+                .map_or(Ok(1), |stride| parse_flow_stride(&stride))?,
         };
         Ok(metadata)
     }
@@ -135,6 +145,15 @@ impl ModelMetadata {
             usize::from(self.input_height) / divisor,
             usize::from(self.input_width) / divisor,
         ]
+    }
+
+    /// (height, width) of each `future_flow` plane.
+    pub fn flow_size(&self) -> (usize, usize) {
+        let stride = usize::from(self.flow_stride);
+        (
+            usize::from(self.input_height) / stride,
+            usize::from(self.input_width) / stride,
+        )
     }
 }
 
@@ -228,6 +247,13 @@ fn parse_atc(value: &str) -> Result<AtcVariant, MetadataError> {
     }
 }
 
+fn parse_flow_stride(value: &str) -> Result<u16, MetadataError> {
+    match value.trim().parse::<u16>() {
+        Ok(stride) if FLOW_STRIDES.contains(&stride) => Ok(stride),
+        _ => Err(invalid(KEY_FLOW_STRIDE, value, "one of 1, 2, 4, 8, 16")),
+    }
+}
+
 /// Written instead of a manifest hash for freshly initialised weights.
 pub const UNTRAINED_MANIFEST: &str = "untrained";
 
@@ -284,6 +310,17 @@ mod tests {
         assert_eq!(metadata.state_shape(3), [1, 128, 17, 22]);
         assert_eq!(metadata.atc, AtcVariant::PositionAware);
         assert_eq!(metadata.train_manifest_sha256, Some("ab".repeat(32)));
+        assert_eq!(metadata.flow_size(), (272, 352));
+    }
+
+    #[test]
+    fn flow_stride_sets_the_flow_size_and_defaults_to_full_resolution() {
+        let mut map = valid();
+        assert_eq!(parse(&map).unwrap().flow_stride, 1);
+        map.insert(KEY_FLOW_STRIDE, "8".to_owned());
+        let metadata = parse(&map).unwrap();
+        assert_eq!(metadata.flow_stride, 8);
+        assert_eq!(metadata.flow_size(), (34, 44));
     }
 
     #[test]
@@ -314,6 +351,7 @@ mod tests {
             (KEY_ATC, "global", "position-aware, reference, none"),
             (KEY_TRAIN_MANIFEST_SHA256, "xyz", "64 hexadecimal"),
             (KEY_TRAIN_STEPS, "many", "non-negative integer"),
+            (KEY_FLOW_STRIDE, "3", "1, 2, 4, 8, 16"),
         ];
         for (key, value, accepted) in cases {
             let mut map = valid();

@@ -5,8 +5,9 @@ use std::time::Duration;
 
 use ort::value::Tensor;
 
-/// Outputs of [`crate::ModelRuntime::forecast`]. Planes are row-major `height × width` at the
-/// padded input size.
+/// Outputs of [`crate::ModelRuntime::forecast`]. Mask planes are row-major `height × width` at
+/// the padded input size; flow planes `flow_height × flow_width` (the input size divided by the
+/// model's `evgate.flow-stride`).
 #[derive(Debug)]
 pub struct ForecastOutput {
     pub(crate) height: usize,
@@ -15,6 +16,8 @@ pub struct ForecastOutput {
     pub(crate) mask_logits: Tensor<f32>,
     pub(crate) future_mask_logits: Tensor<f32>,
     pub(crate) future_flow: Tensor<f32>,
+    pub(crate) flow_height: usize,
+    pub(crate) flow_width: usize,
     pub(crate) inference_time: Duration,
 }
 
@@ -49,10 +52,20 @@ impl ForecastOutput {
             .chunks_exact(self.height * self.width)
     }
 
-    /// Predicted displacement in pixels over each horizon, as (dx plane, dy plane), in
-    /// `horizons_ms()` order.
+    /// Height of each flow plane: `height()` divided by the model's flow stride.
+    pub fn flow_height(&self) -> usize {
+        self.flow_height
+    }
+
+    /// Width of each flow plane: `width()` divided by the model's flow stride.
+    pub fn flow_width(&self) -> usize {
+        self.flow_width
+    }
+
+    /// Predicted displacement in input pixels over each horizon, as (dx plane, dy plane) of
+    /// `flow_height() × flow_width()`, in `horizons_ms()` order.
     pub fn future_flows(&self) -> impl Iterator<Item = (&[f32], &[f32])> {
-        let plane = self.height * self.width;
+        let plane = self.flow_height * self.flow_width;
         self.future_flow
             .extract_tensor()
             .1

@@ -261,7 +261,11 @@ impl ModelRuntime {
         };
         let mask_logits = take(OUTPUT_MASK, vec![1, 1, h, w])?;
         let future_mask_logits = take(OUTPUT_FUTURE_MASK, vec![1, horizon_count, h, w])?;
-        let future_flow = take(OUTPUT_FUTURE_FLOW, vec![1, horizon_count, 2, h, w])?;
+        let (flow_height, flow_width) = self.metadata.flow_size();
+        let future_flow = take(
+            OUTPUT_FUTURE_FLOW,
+            vec![1, horizon_count, 2, flow_height as i64, flow_width as i64],
+        )?;
         let state_shape = |stage: usize| self.state.shape(stage).map(|d| d as i64).to_vec();
         let next_state = [
             take(OUTPUT_STATES[0], state_shape(0))?,
@@ -278,6 +282,8 @@ impl ModelRuntime {
             mask_logits,
             future_mask_logits,
             future_flow,
+            flow_height,
+            flow_width,
             inference_time,
         })
     }

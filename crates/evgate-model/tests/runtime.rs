@@ -71,11 +71,17 @@ fn outputs_have_the_contract_shapes() {
     let futures: Vec<&[f32]> = output.future_mask_logits().collect();
     assert_eq!(futures.len(), HORIZONS.len());
     assert!(futures.iter().all(|f| f.len() == plane));
+    let (flow_height, flow_width) = runtime.metadata().flow_size();
+    assert_eq!(
+        (output.flow_height(), output.flow_width()),
+        (flow_height, flow_width)
+    );
+    let flow_plane = flow_height * flow_width;
     let flows: Vec<(&[f32], &[f32])> = output.future_flows().collect();
     assert_eq!(flows.len(), HORIZONS.len());
     assert!(flows
         .iter()
-        .all(|(dx, dy)| dx.len() == plane && dy.len() == plane));
+        .all(|(dx, dy)| dx.len() == flow_plane && dy.len() == flow_plane));
     assert!(output.mask_logits().iter().all(|v| v.is_finite()));
     assert!(!output.inference_time().is_zero());
     assert_eq!(runtime.windows_carried(), 1);

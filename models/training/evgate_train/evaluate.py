@@ -26,7 +26,7 @@ from tqdm import tqdm
 from .checkpoint import load_checkpoint
 from .linear_extrapolation import extrapolate
 from .metrics import SequenceScores, frame_scores
-from .network import SuppressionNetwork
+from .network import WARP_RESOLUTIONS, SuppressionNetwork
 from .sequence import Sequence, load_sequence
 from .voxel import WINDOW_US, padded, voxel_grid
 
@@ -52,8 +52,10 @@ def evaluate_sequence(
     horizons_ms: list[float],
     with_baselines: bool,
     max_seconds: float = 0.0,
+    warp_resolution: str = "full",
 ) -> dict[str, SequenceScores]:
-    """Scores keyed "current", "future-<h>ms" (and "no-forecast-<h>ms", "linear-<h>ms")."""
+    """Scores keyed "current", "future-<h>ms" (and "no-forecast-<h>ms", "linear-<h>ms");
+    `warp_resolution` as the network's (an export's default is "half")."""
     network.eval()
     height, width = padded(sequence.height), padded(sequence.width)
     states = network.initial_states(1, height, width)
@@ -67,7 +69,7 @@ def evaluate_sequence(
         window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
         ts, xs, ys, on = (a[window] for a in (sequence.events_t, sequence.events_x, sequence.events_y, sequence.events_on))
         voxel = voxel_grid(ts, xs, ys, on, t_end, sequence.width, sequence.height)
-        out = network(torch.from_numpy(voxel)[None], horizons, states)
+        out = network(torch.from_numpy(voxel)[None], horizons, states, warp_resolution=warp_resolution)
         states = out.states
         current = (out.mask_logits[0, 0, : sequence.height, : sequence.width] > 0).numpy()
         now = sequence.grid_index(t_end)
@@ -129,6 +131,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--presets", default="", help="comma-separated presets to keep (default: all)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     parser.add_argument("--max-seconds", type=float, default=0.0, help="score only the leading seconds (0 = all)")
+    parser.add_argument(
+        "--warp-resolution",
+        choices=WARP_RESOLUTIONS,
+        default="full",
+        help="where the future mask logits are warped: full (training) or half (what an export does by default)",
+    )
     parser.add_argument("--output", type=Path, required=True, help="JSON report path")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
@@ -139,7 +147,13 @@ def main(argv: list[str] | None = None) -> int:
     if not paths:
         raise EvaluationSetupError(f"{args.data}: no .npz sequences found")
     keep = {p for p in args.presets.split(",") if p}
-    report: dict = {"data": str(args.data), "horizons_ms": horizons, "models": {}, "sequences": [str(p) for p in paths]}
+    report: dict = {
+        "data": str(args.data),
+        "horizons_ms": horizons,
+        "warp_resolution": args.warp_resolution,
+        "models": {},
+        "sequences": [str(p) for p in paths],
+    }
     networks = [(name, load_checkpoint(path)) for name, path in models]
     results: dict[str, list] = defaultdict(list)
     for path in tqdm(paths, desc="evaluate", unit="seq"):
@@ -148,7 +162,12 @@ def main(argv: list[str] | None = None) -> int:
             continue
         for index, (name, checkpoint) in enumerate(networks):
             scores = evaluate_sequence(
-                checkpoint.network, sequence, horizons, with_baselines=index == 0, max_seconds=args.max_seconds
+                checkpoint.network,
+                sequence,
+                horizons,
+                with_baselines=index == 0,
+                max_seconds=args.max_seconds,
+                warp_resolution=args.warp_resolution,
             )
             results[name].append((sequence.preset, {key: s.summary() for key, s in scores.items()}))
     for name, checkpoint in networks:

@@ -2,6 +2,9 @@
 
     python -m evgate_train.export --checkpoint runs/S/checkpoint.pt --output ../evgate-S.onnx
     python -m evgate_train.export --size XS --untrained --output /tmp/evgate-XS-untrained.onnx
+
+The future mask logits are warped at half resolution by default (`--warp-resolution`,
+network.WARP_RESOLUTIONS): the same weights, a quarter of the sampling work per horizon.
 """
 
 import argparse
@@ -14,7 +17,7 @@ import torch
 from torch import nn
 
 from .checkpoint import load_checkpoint
-from .network import NetworkConfig, SuppressionNetwork, check_input_size
+from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork, check_input_size, check_warp_resolution
 from .voxel import WINDOW_US
 
 MAX_HORIZON_MS = 100
@@ -29,13 +32,18 @@ log = logging.getLogger("evgate_train.export")
 class ContractWrapper(nn.Module):
     """The contract's flat signature: one stream (batch 1), horizons [K], states as four inputs."""
 
-    def __init__(self, network: SuppressionNetwork):
+    def __init__(self, network: SuppressionNetwork, warp_resolution: str):
         super().__init__()
         self.network = network
+        self.warp_resolution = check_warp_resolution(warp_resolution)
 
     def forward(self, voxel, horizons_ms, state_0, state_1, state_2, state_3):
-        out = self.network(voxel, horizons_ms.unsqueeze(0), [state_0, state_1, state_2, state_3])
-        return (out.mask_logits, out.future_mask_logits, out.future_flow, *out.states)
+        states = [state_0, state_1, state_2, state_3]
+        out = self.network(voxel, horizons_ms.unsqueeze(0), states, warp_resolution=self.warp_resolution)
+        # The flow leaves at the flow decoder's resolution (metadata evgate.flow-stride): nothing
+        # in the graph needs it at full resolution, and upsampling 2K planes there cost more
+        # than the warp itself on CPU.
+        return (out.mask_logits, out.future_mask_logits, out.coarse_flow, *out.states)
 
 
 def example_inputs(network: SuppressionNetwork, height: int, width: int, horizons: int = 2) -> tuple[torch.Tensor, ...]:
@@ -52,11 +60,12 @@ def export(
     width: int,
     manifest_sha256: str,
     train_steps: int,
+    warp_resolution: str = "half",
 ) -> None:
     check_input_size(height, width)
     # The wrapper must be in eval mode too: the exporter restores the wrapper's mode afterwards,
     # recursively, and a network left in training mode would use batch statistics.
-    wrapper = ContractWrapper(network).eval()
+    wrapper = ContractWrapper(network, warp_resolution).eval()
     inputs = example_inputs(network, height, width)
     horizon_axis = {"horizons_ms": {0: "K"}, "future_mask_logits": {1: "K"}, "future_flow": {1: "K"}}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -85,6 +94,8 @@ def export(
         "evgate.atc": config.time_conditioning,
         "evgate.train-manifest-sha256": manifest_sha256,
         "evgate.train-steps": str(train_steps),
+        "evgate.warp-resolution": warp_resolution,
+        "evgate.flow-stride": str(network.flow_stride),
     }
     del model.metadata_props[:]
     for key, value in metadata.items():
@@ -112,6 +123,13 @@ def main(argv: list[str] | None = None) -> int:
         help="optimiser steps to record instead of the checkpoint's own count: a run started with "
         "--init-from counts from 0, so a fine-tuned chain records the sum of its runs' steps",
     )
+    parser.add_argument(
+        "--warp-resolution",
+        choices=WARP_RESOLUTIONS,
+        default="half",
+        help="resolution the future mask logits are warped at: half (the mask decoder's, cheaper on CPU) or "
+        "full (the training path, as exports before the half-resolution path)",
+    )
     args = parser.parse_args(argv)
     if args.train_steps is not None and args.train_steps < 0:
         parser.error(f"--train-steps {args.train_steps}: expected a non-negative number of steps")
@@ -125,8 +143,11 @@ def main(argv: list[str] | None = None) -> int:
         torch.manual_seed(0)
         network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
         manifest, steps = "untrained", 0
-    export(network, args.output, args.height, args.width, manifest, steps)
-    log.info("wrote %s (%s, %dx%d, %d steps)", args.output, network.config.size, args.width, args.height, steps)
+    export(network, args.output, args.height, args.width, manifest, steps, args.warp_resolution)
+    log.info(
+        "wrote %s (%s, %dx%d, %d steps, warp at %s resolution)",
+        args.output, network.config.size, args.width, args.height, steps, args.warp_resolution,
+    )
     return 0
 
 

@@ -5,7 +5,8 @@ Built for a CPU budget of about 1 GFLOP per window at 346x260: the first encoder
 half resolution (a stride-2 stem), the two shallow ConvGRUs use 1x1 gates and the deep ones
 depthwise-separable 3x3 gates, the decoders are narrow (the model's base width), the mask
 decoder ends at half resolution and the flow decoder, run once per horizon, at an eighth; both
-are upsampled bilinearly, and the mask logits are warped at full resolution."""
+are upsampled bilinearly. Training warps the mask logits at full resolution; the exported graph
+warps them at half resolution, where the mask decoder ends (`WARP_RESOLUTIONS`)."""
 
 from dataclasses import dataclass
 
@@ -17,7 +18,7 @@ from .convgru import ConvGRU
 from .decoder import Decoder, upsample
 from .sizes import STAGES, base_channels, stage_channels
 from .time_conditioning import TimeConditioning, check_variant
-from .warp import backward_warp
+from .warp import backward_warp, backward_warp_normalised, normalising_scale
 
 VOXEL_BINS = 2
 INPUT_MULTIPLE = 2**STAGES
@@ -25,6 +26,23 @@ INPUT_MULTIPLE = 2**STAGES
 
 class InputSizeError(ValueError):
     """A voxel grid whose height or width is not a multiple of 16."""
+
+
+class WarpResolutionError(ValueError):
+    """A warp resolution that is not one of `WARP_RESOLUTIONS`."""
+
+
+# Where the future mask logits are warped. "full": the upsampled logits by the full-resolution
+# flow (training, and exports before the half-resolution path). "half": the mask decoder's
+# half-resolution logits by the flow upsampled to half resolution, then the K warped maps are
+# upsampled; a quarter of the sampling, for the CPU budget of the exported graph.
+WARP_RESOLUTIONS = ("full", "half")
+
+
+def check_warp_resolution(resolution: str) -> str:
+    if resolution not in WARP_RESOLUTIONS:
+        raise WarpResolutionError(f"unknown warp resolution {resolution!r}; accepted: {', '.join(WARP_RESOLUTIONS)}")
+    return resolution
 
 
 # Encoder stages from this index on have 3x3 (depthwise-separable) ConvGRU gates; the shallow,
@@ -65,6 +83,9 @@ class NetworkOutput:
     mask_logits: torch.Tensor  # [B, 1, H, W]
     future_mask_logits: torch.Tensor  # [B, K, H, W]
     future_flow: torch.Tensor  # [B, K, 2, H, W], pixels over each horizon
+    # [B, K, 2, H / s, W / s] with s = SuppressionNetwork.flow_stride: the same flow at the flow
+    # decoder's own resolution, before the upsampling (what an export outputs).
+    coarse_flow: torch.Tensor
     velocity: torch.Tensor  # [B, K, 2, H, W], px/ms
     states: list[torch.Tensor]
 
@@ -113,7 +134,7 @@ class SuppressionNetwork(nn.Module):
         self.flow_decoder = Decoder(
             config.attention_width, config.decoder_width, skip_channels[:FLOW_DECODER_LEVELS], 2
         )
-        self.flow_upsampling = 2 ** (STAGES - FLOW_DECODER_LEVELS)
+        self.flow_stride = 2 ** (STAGES - FLOW_DECODER_LEVELS)
 
     def initial_states(self, batch: int, height: int, width: int) -> list[torch.Tensor]:
         check_input_size(height, width)
@@ -122,8 +143,12 @@ class SuppressionNetwork(nn.Module):
             for stage, c in enumerate(self.config.state_channels)
         ]
 
-    def forward(self, voxel: torch.Tensor, horizons_ms: torch.Tensor, states: list[torch.Tensor]) -> NetworkOutput:
-        """voxel [B, 2, H, W], horizons_ms [B, K], states as `initial_states`."""
+    def forward(
+        self, voxel: torch.Tensor, horizons_ms: torch.Tensor, states: list[torch.Tensor], warp_resolution: str = "full"
+    ) -> NetworkOutput:
+        """voxel [B, 2, H, W], horizons_ms [B, K], states as `initial_states`; `warp_resolution`
+        one of `WARP_RESOLUTIONS` (only the future mask logits depend on it)."""
+        check_warp_resolution(warp_resolution)
         batch, _, height, width = voxel.shape
         horizons = horizons_ms.shape[1]
         x = voxel
@@ -133,7 +158,8 @@ class SuppressionNetwork(nn.Module):
             new_states.append(x)
         bottleneck = self.residual(x)
         skips = new_states[:-1][::-1]
-        mask_logits = upsample(self.mask_decoder(bottleneck, self.mask_decoder.project_skips(skips)))
+        half_mask_logits = self.mask_decoder(bottleneck, self.mask_decoder.project_skips(skips))
+        mask_logits = upsample(half_mask_logits)
 
         def per_horizon(t: torch.Tensor) -> torch.Tensor:
             return t.unsqueeze(1).expand(-1, horizons, *t.shape[1:]).reshape(batch * horizons, *t.shape[1:])
@@ -142,15 +168,25 @@ class SuppressionNetwork(nn.Module):
         conditioned = self.time_conditioning(per_horizon(self.flow_features(bottleneck)), flat_horizons)
         flow_skips = [per_horizon(s) for s in self.flow_decoder.project_skips(skips[:FLOW_DECODER_LEVELS])]
         coarse_velocity = self.flow_decoder(conditioned, flow_skips)
-        velocity = upsample(coarse_velocity, self.flow_upsampling)
+        velocity = upsample(coarse_velocity, self.flow_stride)
         # Upsampling is linear, so scaling by the horizon before it gives the same flow with a
         # full-resolution multiply less per horizon; the exported graph keeps only this path.
-        flow = upsample(coarse_velocity * flat_horizons.view(-1, 1, 1, 1), self.flow_upsampling)
-        future = backward_warp(per_horizon(mask_logits), flow)
+        coarse_flow = coarse_velocity * flat_horizons.view(-1, 1, 1, 1)
+        flow = upsample(coarse_flow, self.flow_stride)
+        if warp_resolution == "full":
+            future = backward_warp(per_horizon(mask_logits), flow)
+        else:
+            # Half-resolution pixels are twice as large (the displacement halves); scaling the
+            # coarse flow before the (linear) upsampling keeps the multiply off the large map.
+            half_height, half_width = half_mask_logits.shape[-2:]
+            scale = 0.5 * normalising_scale(half_height, half_width).to(coarse_flow)
+            half_flow = upsample(coarse_flow * scale, self.flow_stride // 2)
+            future = upsample(backward_warp_normalised(per_horizon(half_mask_logits), half_flow))
         return NetworkOutput(
             mask_logits=mask_logits,
             future_mask_logits=future.reshape(batch, horizons, height, width),
             future_flow=flow.reshape(batch, horizons, 2, height, width),
+            coarse_flow=coarse_flow.reshape(batch, horizons, 2, height // self.flow_stride, width // self.flow_stride),
             velocity=velocity.reshape(batch, horizons, 2, height, width),
             states=new_states,
         )

@@ -1,5 +1,6 @@
 """Backward warping: the value at x after the motion is the value at x - flow(x) before it."""
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -20,3 +21,28 @@ def backward_warp(image: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
         dim=-1,
     )
     return F.grid_sample(image, grid, mode="bilinear", padding_mode="zeros", align_corners=True)
+
+
+
+def normalising_scale(height: int, width: int) -> torch.Tensor:
+    """[1, 2, 1, 1]: multiplies a flow [N, 2, H, W] in pixels into grid_sample's normalised units
+    (align_corners off, where the image spans [-1, 1] over `width` x `height` pixels)."""
+    return torch.tensor([2.0 / width, 2.0 / height]).view(1, 2, 1, 1)
+
+
+def backward_warp_normalised(image: torch.Tensor, normalised_flow: torch.Tensor) -> torch.Tensor:
+    """`backward_warp` for a flow already multiplied by `normalising_scale`, with the sampling
+    positions normalised the other way (align_corners off): the same positions and values.
+
+    ONNX Runtime's CPU GridSample has a fast path only for bilinear, zero padding and
+    align_corners off. The pixel grid is built with numpy so that an ONNX export holds it as a
+    constant, and a flow scaled before it is upsampled (upsampling is linear) leaves a
+    transpose and a subtraction per warp. Training keeps `backward_warp` so its numerics do not
+    change.
+    """
+    height, width = int(image.shape[2]), int(image.shape[3])
+    rows, cols = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+    # Pixel centre x sits at (2x + 1) / width - 1 when corners are not aligned.
+    positions = np.stack([(2 * cols + 1) / width - 1, (2 * rows + 1) / height - 1], axis=-1)
+    grid = torch.from_numpy(positions[None].astype(np.float32)) - normalised_flow.permute(0, 2, 3, 1)
+    return F.grid_sample(image, grid, mode="bilinear", padding_mode="zeros", align_corners=False)

@@ -12,8 +12,9 @@ from evgate_train.voxel import voxel_grid
 HEIGHT, WIDTH = 48, 96
 
 
-@pytest.fixture(scope="module")
-def exported(tmp_path_factory):
+@pytest.fixture(scope="module", params=["half", "full"])
+def exported(tmp_path_factory, request):
+    """(network, session, path, warp resolution): parity holds for either warp resolution."""
     torch.manual_seed(1)
     network = SuppressionNetwork(NetworkConfig(size="XS")).eval()
     # Random, non-zero head weights: freshly initialised refinement heads are zero and would
@@ -21,29 +22,29 @@ def exported(tmp_path_factory):
     with torch.no_grad():
         for parameter in network.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))
-    path = tmp_path_factory.mktemp("onnx") / "tiny.onnx"
-    export(network, path, HEIGHT, WIDTH, manifest_sha256="ab" * 32, train_steps=12)
+    path = tmp_path_factory.mktemp("onnx") / f"tiny-{request.param}.onnx"
+    export(network, path, HEIGHT, WIDTH, manifest_sha256="ab" * 32, train_steps=12, warp_resolution=request.param)
     options = onnxruntime.SessionOptions()
     options.intra_op_num_threads = 1
     session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-    return network, session, path
+    return network, session, path, request.param
 
 
-def _compare(network, session, voxel: np.ndarray, horizons: list[float], states=None):
+def _compare(network, session, warp_resolution: str, voxel: np.ndarray, horizons: list[float], states=None):
     torch_states = [torch.from_numpy(s) for s in states] if states else network.initial_states(1, HEIGHT, WIDTH)
     with torch.no_grad():
-        out = network(torch.from_numpy(voxel)[None], torch.tensor([horizons]), torch_states)
+        out = network(torch.from_numpy(voxel)[None], torch.tensor([horizons]), torch_states, warp_resolution)
     feeds = {"voxel": voxel[None], "horizons_ms": np.array(horizons, np.float32)}
     feeds.update({f"state_{i}": s.numpy() for i, s in enumerate(torch_states)})
     onnx_out = session.run(OUTPUT_NAMES, feeds)
-    expected = [out.mask_logits, out.future_mask_logits, out.future_flow, *out.states]
+    expected = [out.mask_logits, out.future_mask_logits, out.coarse_flow, *out.states]
     for name, got, want in zip(OUTPUT_NAMES, onnx_out, expected):
         np.testing.assert_allclose(got, want.numpy(), atol=1e-4, rtol=1e-4, err_msg=name)
     return [s.numpy() for s in out.states]
 
 
 def test_contract_names_and_metadata(exported):
-    _, session, path = exported
+    _, session, path, warp_resolution = exported
     assert [i.name for i in session.get_inputs()] == INPUT_NAMES
     assert [o.name for o in session.get_outputs()] == OUTPUT_NAMES
     metadata = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
@@ -53,19 +54,23 @@ def test_contract_names_and_metadata(exported):
     assert metadata["evgate.atc"] == "position-aware"
     assert metadata["evgate.train-steps"] == "12"
     assert metadata["evgate.train-manifest-sha256"] == "ab" * 32
+    assert metadata["evgate.warp-resolution"] == warp_resolution
+    assert metadata["evgate.flow-stride"] == "8"
+    flow = next(o for o in session.get_outputs() if o.name == "future_flow")
+    assert flow.shape[2:] == [2, HEIGHT // 8, WIDTH // 8]
     assert {"evgate.bins", "evgate.window-ms", "evgate.max-horizon-ms", "evgate.base-channels"} <= metadata.keys()
 
 
 @pytest.mark.parametrize("horizons", [[100.0], [25.0, 50.0, 75.0, 100.0]])
 def test_parity_on_random_inputs(exported, horizons):
-    network, session, _ = exported
+    network, session, _, warp_resolution = exported
     rng = np.random.default_rng(5)
     states = [rng.standard_normal(tuple(s.shape)).astype(np.float32) * 0.5 for s in network.initial_states(1, HEIGHT, WIDTH)]
-    _compare(network, session, rng.standard_normal((2, HEIGHT, WIDTH)).astype(np.float32), horizons, states)
+    _compare(network, session, warp_resolution, rng.standard_normal((2, HEIGHT, WIDTH)).astype(np.float32), horizons, states)
 
 
 def test_parity_on_simulated_windows_with_carried_state(exported, synthetic_dir):
-    network, session, _ = exported
+    network, session, _, warp_resolution = exported
     sequence = load_sequence(synthetic_dir / "slide-0.npz")
     states = None
     for reference in sequence.ref_ts[:3]:
@@ -75,4 +80,4 @@ def test_parity_on_simulated_windows_with_carried_state(exported, synthetic_dir)
             sequence.events_t[window], sequence.events_x[window], sequence.events_y[window],
             sequence.events_on[window], t_end, sequence.width, sequence.height,
         )
-        states = _compare(network, session, voxel, [20.0, 100.0], states)
+        states = _compare(network, session, warp_resolution, voxel, [20.0, 100.0], states)

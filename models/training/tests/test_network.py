@@ -1,7 +1,13 @@
 import pytest
 import torch
 
-from evgate_train.network import InputSizeError, NetworkConfig, SuppressionNetwork
+from evgate_train.network import (
+    WARP_RESOLUTIONS,
+    InputSizeError,
+    NetworkConfig,
+    SuppressionNetwork,
+    WarpResolutionError,
+)
 from evgate_train.sizes import UnknownSizeError
 from evgate_train.time_conditioning import TimeConditioning, UnknownVariantError
 
@@ -16,15 +22,43 @@ def test_output_shapes(variant):
     assert out.mask_logits.shape == (2, 1, 48, 64)
     assert out.future_mask_logits.shape == (2, 3, 48, 64)
     assert out.future_flow.shape == (2, 3, 2, 48, 64)
+    assert out.coarse_flow.shape == (2, 3, 2, 6, 8)
     assert [s.shape for s in out.states] == [s.shape for s in states]
 
 
-def test_zero_horizon_forecast_is_the_current_mask():
+@pytest.mark.parametrize("warp_resolution", WARP_RESOLUTIONS)
+def test_zero_horizon_forecast_is_the_current_mask(warp_resolution):
     torch.manual_seed(0)
     network = SuppressionNetwork(NetworkConfig(size="XS"))
-    out = network(torch.randn(1, 2, 32, 32), torch.tensor([[0.0]]), network.initial_states(1, 32, 32))
+    states = network.initial_states(1, 32, 32)
+    out = network(torch.randn(1, 2, 32, 32), torch.tensor([[0.0]]), states, warp_resolution)
     assert torch.count_nonzero(out.future_flow) == 0
     torch.testing.assert_close(out.future_mask_logits[:, 0], out.mask_logits[:, 0])
+
+
+def test_half_resolution_warp_follows_the_full_resolution_one():
+    """Same weights, both warps: the half-resolution forecast is far closer to the
+    full-resolution one than the unwarped mask is (the flows move logits by ~10 px here)."""
+    torch.manual_seed(3)
+    network = SuppressionNetwork(NetworkConfig(size="XS")).eval()
+    with torch.no_grad():
+        for parameter in network.parameters():
+            parameter.add_(0.05 * torch.randn_like(parameter))
+        voxel, horizons = torch.randn(1, 2, 64, 96), torch.tensor([[40.0, 100.0]])
+        full = network(voxel, horizons, network.initial_states(1, 64, 96), "full")
+        half = network(voxel, horizons, network.initial_states(1, 64, 96), "half")
+    torch.testing.assert_close(half.mask_logits, full.mask_logits)
+    torch.testing.assert_close(half.coarse_flow, full.coarse_flow)
+    assert float(full.future_flow.abs().mean()) > 5.0
+    unwarped = full.mask_logits.expand_as(full.future_mask_logits)
+    warp_effect = (unwarped - full.future_mask_logits).abs().mean()
+    assert (half.future_mask_logits - full.future_mask_logits).abs().mean() < 0.25 * warp_effect
+
+
+def test_unknown_warp_resolution_lists_the_accepted_ones():
+    network = SuppressionNetwork(NetworkConfig(size="XS"))
+    with pytest.raises(WarpResolutionError, match="'quarter'; accepted: full, half"):
+        network(torch.randn(1, 2, 32, 32), torch.tensor([[10.0]]), network.initial_states(1, 32, 32), "quarter")
 
 
 def test_state_carries_information_across_windows():
