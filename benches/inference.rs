@@ -81,6 +81,10 @@ struct InferenceReport {
     intra_threads: usize,
     spin_threads: bool,
     cpu_cores_visible: usize,
+    /// 1, 5 and 15 minute load averages (/proc/loadavg) before and after the measured windows:
+    /// on a shared machine the wall times only mean something next to them.
+    load_average_before: Option<[f64; 3]>,
+    load_average_after: Option<[f64; 3]>,
     windows: usize,
     events_per_window: usize,
     horizons_ms: Vec<f32>,
@@ -96,6 +100,17 @@ struct InferenceReport {
     /// Voxelisation + inference + thresholding per window.
     total: Stage,
     prediction_age: Vec<PredictionAge>,
+}
+
+/// The 1, 5 and 15 minute load averages, where /proc/loadavg exists.
+fn load_average() -> Option<[f64; 3]> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    let mut fields = text.split_whitespace().map(str::parse::<f64>);
+    Some([
+        fields.next()?.ok()?,
+        fields.next()?.ok()?,
+        fields.next()?.ok()?,
+    ])
 }
 
 /// User + system CPU time of the whole process so far.
@@ -196,6 +211,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut thresholding = Vec::with_capacity(windows);
     let mut total = Vec::with_capacity(windows);
 
+    let load_average_before = load_average();
     let progress = ProgressBar::new((WARM_UP_WINDOWS + windows) as u64);
     progress.set_style(ProgressStyle::with_template(
         "{msg} [{bar:40}] {pos}/{len} windows ({eta} left)",
@@ -246,6 +262,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         progress.inc(1);
     }
     progress.finish_and_clear();
+    let load_average_after = load_average();
 
     let total_stage = Stage::of(&total);
     let report = InferenceReport {
@@ -257,6 +274,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         intra_threads: threads,
         spin_threads,
         cpu_cores_visible: std::thread::available_parallelism().map_or(0, |n| n.get()),
+        load_average_before,
+        load_average_after,
         windows,
         events_per_window,
         prediction_age: horizons_ms
@@ -285,6 +304,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         report.intra_threads,
         report.windows,
         report.events_per_window
+    );
+    let describe_load = |load: Option<[f64; 3]>| {
+        load.map_or("unknown".to_owned(), |[one, five, fifteen]| {
+            format!("{one:.2} {five:.2} {fifteen:.2}")
+        })
+    };
+    println!(
+        "load average (1, 5, 15 min): {} before, {} after",
+        describe_load(report.load_average_before),
+        describe_load(report.load_average_after)
     );
     for (name, stage) in [
         ("voxelisation", &report.voxelisation),
