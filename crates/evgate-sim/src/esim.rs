@@ -123,43 +123,79 @@ impl PixelBand<'_> {
         refractory_us: i64,
         out: &mut Vec<LabelledEvent>,
     ) {
-        let span = (t1_us - t0_us) as f32;
-        for i in 0..log_intensity.len() {
-            let (l0, l1) = (self.previous[i], log_intensity[i]);
-            let mut reference = self.reference[i];
-            let (on, off) = (self.threshold_on[i], self.threshold_off[i]);
-            if l1 - reference >= on || reference - l1 >= off {
-                let label = if surface[i] != 0 {
-                    surface[i]
-                } else {
-                    self.previous_surface[i]
-                };
-                let pixel = self.first_pixel + i;
-                let (x, y) = ((pixel % self.width) as u16, (pixel / self.width) as u16);
-                let change = l1 - l0;
-                let positive = l1 > reference;
-                let step = if positive { on } else { -off };
-                while (positive && l1 - reference >= on) || (!positive && reference - l1 >= off) {
-                    reference += step;
-                    let fraction = if change.abs() > 1e-9 {
-                        ((reference - l0) / change).clamp(0.0, 1.0)
-                    } else {
-                        1.0
-                    };
-                    let t = (t0_us + (fraction * span).ceil() as i64).clamp(t0_us + 1, t1_us);
-                    if t - self.last_event_us[i] >= refractory_us {
-                        self.last_event_us[i] = t;
-                        out.push(LabelledEvent {
-                            event: Event::new(t, x, y, positive),
-                            label,
-                        });
-                    }
-                }
-                self.reference[i] = reference;
-            }
-            self.previous[i] = l1;
-            self.previous_surface[i] = surface[i];
+        for (i, (&log, &id)) in log_intensity.iter().zip(surface).enumerate() {
+            self.emit_pixel(i, log, id, t0_us, t1_us, refractory_us, out);
         }
+    }
+
+    /// [`PixelBand::emit`] for the band's pixel `i` alone, whose value at `t1_us` is `l1` on
+    /// surface `surface` (its previous value is the one at `t0_us`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn emit_pixel(
+        &mut self,
+        i: usize,
+        l1: f32,
+        surface: u16,
+        t0_us: i64,
+        t1_us: i64,
+        refractory_us: i64,
+        out: &mut Vec<LabelledEvent>,
+    ) {
+        let reference = self.reference[i];
+        // Most pixels cross no threshold in a step: that test stays inline, the crossings
+        // are handled out of line.
+        if l1 - reference >= self.threshold_on[i] || reference - l1 >= self.threshold_off[i] {
+            self.fire(i, l1, surface, t0_us, t1_us, refractory_us, out);
+        }
+        self.previous[i] = l1;
+        self.previous_surface[i] = surface;
+    }
+
+    /// The events of pixel `i` crossing one or more thresholds on its way to `l1`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn fire(
+        &mut self,
+        i: usize,
+        l1: f32,
+        surface: u16,
+        t0_us: i64,
+        t1_us: i64,
+        refractory_us: i64,
+        out: &mut Vec<LabelledEvent>,
+    ) {
+        let l0 = self.previous[i];
+        let mut reference = self.reference[i];
+        let (on, off) = (self.threshold_on[i], self.threshold_off[i]);
+        let label = if surface != 0 {
+            surface
+        } else {
+            self.previous_surface[i]
+        };
+        let span = (t1_us - t0_us) as f32;
+        let pixel = self.first_pixel + i;
+        let (x, y) = ((pixel % self.width) as u16, (pixel / self.width) as u16);
+        let change = l1 - l0;
+        let positive = l1 > reference;
+        let step = if positive { on } else { -off };
+        while (positive && l1 - reference >= on) || (!positive && reference - l1 >= off) {
+            reference += step;
+            let fraction = if change.abs() > 1e-9 {
+                ((reference - l0) / change).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
+            let t = (t0_us + (fraction * span).ceil() as i64).clamp(t0_us + 1, t1_us);
+            if t - self.last_event_us[i] >= refractory_us {
+                self.last_event_us[i] = t;
+                out.push(LabelledEvent {
+                    event: Event::new(t, x, y, positive),
+                    label,
+                });
+            }
+        }
+        self.reference[i] = reference;
     }
 }
 

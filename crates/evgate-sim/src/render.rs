@@ -140,8 +140,21 @@ impl ScreenBounds {
     }
 }
 
+/// Pixels per block of the loops written for vectorisation.
+const LANES: usize = 8;
+
 /// Marks a pixel whose ray meets no panel.
 const NO_PANEL: u32 = u32::MAX;
+
+/// Per-worker buffers for rendering rows: the columns' ray slopes, a row of ray directions
+/// and the nearest panel along each.
+pub struct RowScratch {
+    ray_x: Vec<f32>,
+    directions: RowDirections,
+    nearest_depth: Vec<f32>,
+    nearest_panel: Vec<u32>,
+    active_objects: Vec<usize>,
+}
 
 /// World-frame ray directions of one row, one array per component so that loops over columns
 /// vectorise.
@@ -192,10 +205,20 @@ impl RowDirections {
 
 impl<'a> Snapshot<'a> {
     pub fn new(scene: &'a Scene, t_s: f32) -> Snapshot<'a> {
+        Snapshot::build(scene, t_s, true)
+    }
+
+    /// The static world alone at `t_s`, as if no object moved through it: what the moving
+    /// objects occlude is still rendered (the simulator interpolates it between renders).
+    pub fn static_world(scene: &'a Scene, t_s: f32) -> Snapshot<'a> {
+        Snapshot::build(scene, t_s, false)
+    }
+
+    fn build(scene: &'a Scene, t_s: f32, with_objects: bool) -> Snapshot<'a> {
         let camera = scene.ego.pose(t_s);
         let drive = scene.ego.drive_offset(t_s);
-        let objects = scene
-            .objects
+        let object_count = if with_objects { scene.objects.len() } else { 0 };
+        let objects = scene.objects[..object_count]
             .iter()
             .map(|object| {
                 let pose = object.path.pose(t_s, drive);
@@ -237,7 +260,7 @@ impl<'a> Snapshot<'a> {
             scene,
             camera,
             panel_planes,
-            all_objects: (0..scene.objects.len()).collect(),
+            all_objects: (0..object_count).collect(),
             objects,
             panel_bounds,
         }
@@ -253,11 +276,6 @@ impl<'a> Snapshot<'a> {
     }
 
     /// Renders rows `first_row..first_row + rows` into the given row-major slices.
-    ///
-    /// The panels are searched for a whole row at a time, panel after panel, in plain loops
-    /// over columns that the compiler vectorises (the division per panel and pixel dominated
-    /// the per-pixel search); every pixel still sees the same operations in the same order as
-    /// [`Snapshot::trace`], so the output is bit-identical to tracing pixel by pixel.
     pub fn render_rows(
         &self,
         first_row: usize,
@@ -265,51 +283,223 @@ impl<'a> Snapshot<'a> {
         surface: &mut [u16],
         depth: &mut [f32],
     ) {
+        self.render_rows_with(
+            first_row,
+            log_intensity,
+            surface,
+            depth,
+            &mut self.row_scratch(),
+        );
+    }
+
+    /// [`Snapshot::render_rows`] with the caller's buffers.
+    ///
+    /// A row is rendered in passes over its columns: the panels are searched panel after
+    /// panel, then the texture coordinates and footprint of every panel hit are computed, in
+    /// plain loops that the compiler vectorises; the texture lookups and the moving objects
+    /// (within their bounds only) follow pixel by pixel. Every pixel still sees the same
+    /// operations in the same order as [`Snapshot::trace`], so the output is bit-identical to
+    /// tracing pixel by pixel.
+    pub fn render_rows_with(
+        &self,
+        first_row: usize,
+        log_intensity: &mut [f32],
+        surface: &mut [u16],
+        depth: &mut [f32],
+        scratch: &mut RowScratch,
+    ) {
         let width = self.scene.sensor.width as usize;
         let rows = log_intensity.len() / width;
-        let intrinsics = &self.scene.intrinsics;
-        let ray_x: Vec<f32> = (0..width)
-            .map(|column| intrinsics.ray(column as f32, 0.0).x)
-            .collect();
-        let mut directions = RowDirections::new(width);
-        let mut nearest_depth = vec![f32::INFINITY; width];
-        let mut nearest_panel = vec![NO_PANEL; width];
-        let mut active_objects = Vec::with_capacity(self.objects.len());
         for row in 0..rows {
             let y = (first_row + row) as f32;
-            let ray_y = intrinsics.ray(0.0, y).y;
-            directions.fill(&self.camera.rotation, &ray_x, ray_y);
-            nearest_depth.fill(f32::INFINITY);
-            nearest_panel.fill(NO_PANEL);
-            for (i, bounds) in self.panel_bounds.iter().enumerate() {
-                if bounds.contains_row(y) {
-                    let columns = bounds.columns(width);
+            let pixels = row * width..(row + 1) * width;
+            self.nearest_panels(y, 0..width, scratch);
+            self.shade_panels(scratch, &mut log_intensity[pixels.clone()]);
+            surface[pixels.clone()].fill(0);
+            depth[pixels.clone()].copy_from_slice(&scratch.nearest_depth[..width]);
+            scratch.active_objects.clear();
+            scratch.active_objects.extend(
+                (0..self.objects.len()).filter(|&i| self.objects[i].bounds.contains_row(y)),
+            );
+            let Some(columns) = scratch
+                .active_objects
+                .iter()
+                .map(|&i| self.objects[i].bounds.columns(width))
+                .filter(|columns| !columns.is_empty())
+                .reduce(|a, b| a.start.min(b.start)..a.end.max(b.end))
+            else {
+                continue;
+            };
+            for column in columns {
+                let direction = scratch.directions.at(column);
+                if let Some(hit) = self.nearest_object(
+                    column as f32,
+                    direction,
+                    scratch.nearest_depth[column],
+                    &scratch.active_objects,
+                ) {
+                    let i = pixels.start + column;
+                    log_intensity[i] = self.shade(&hit.material, direction, hit.depth);
+                    surface[i] = hit.id;
+                    depth[i] = hit.depth;
+                }
+            }
+        }
+    }
+
+    /// Log intensity of the nearest panel along each ray of the row searched by
+    /// [`Snapshot::nearest_panels`] (dark where there is none): what `complete_hit` and
+    /// `shade` compute, pixel by pixel without the objects.
+    fn shade_panels(&self, scratch: &RowScratch, log_intensity: &mut [f32]) {
+        let origin = self.camera.translation;
+        let fx = self.scene.intrinsics.fx;
+        for (c, log) in log_intensity.iter_mut().enumerate() {
+            let i = scratch.nearest_panel[c];
+            if i == NO_PANEL {
+                *log = LOG_DARK;
+                continue;
+            }
+            let (panel, plane) = (
+                &self.scene.panels[i as usize],
+                &self.panel_planes[i as usize],
+            );
+            let direction = scratch.directions.at(c);
+            let distance = scratch.nearest_depth[c];
+            let relative = origin + direction * distance - panel.origin;
+            let cos_incidence = (plane.normal.dot(direction).abs() / direction.length()).max(0.05);
+            let metres_per_pixel = distance / (fx * cos_incidence);
+            let tpm = plane.texels_per_m;
+            *log = self.scene.textures[panel.texture].sample(
+                relative.dot(panel.axis_u) * tpm,
+                relative.dot(panel.axis_v) * tpm,
+                metres_per_pixel * tpm,
+            ) + plane.log_illumination;
+        }
+    }
+
+    /// Buffers for rendering rows of this snapshot's sensor, allocated once per worker.
+    pub fn row_scratch(&self) -> RowScratch {
+        let width = self.scene.sensor.width as usize;
+        let intrinsics = &self.scene.intrinsics;
+        RowScratch {
+            ray_x: (0..width)
+                .map(|column| intrinsics.ray(column as f32, 0.0).x)
+                .collect(),
+            directions: RowDirections::new(width),
+            nearest_depth: vec![f32::INFINITY; width],
+            nearest_panel: vec![NO_PANEL; width],
+            active_objects: Vec::with_capacity(self.objects.len()),
+        }
+    }
+
+    /// Fills `scratch` with the ray directions of `columns` of row `y` (from index 0) and the
+    /// nearest panel along each.
+    fn nearest_panels(&self, y: f32, columns: Range<usize>, scratch: &mut RowScratch) {
+        let width = self.scene.sensor.width as usize;
+        let n = columns.len();
+        let ray_y = self.scene.intrinsics.ray(0.0, y).y;
+        scratch.directions.fill(
+            &self.camera.rotation,
+            &scratch.ray_x[columns.clone()],
+            ray_y,
+        );
+        scratch.nearest_depth[..n].fill(f32::INFINITY);
+        scratch.nearest_panel[..n].fill(NO_PANEL);
+        for (i, bounds) in self.panel_bounds.iter().enumerate() {
+            if bounds.contains_row(y) {
+                let on_panel = bounds.columns(width);
+                let start = on_panel.start.max(columns.start);
+                let end = on_panel.end.min(columns.end);
+                if start >= end {
+                    continue;
+                }
+                let local = start - columns.start..end - columns.start;
+                if !self.plane_behind(i, &scratch.directions, local.clone()) {
                     self.nearest_on_panel(
                         i,
-                        &directions.slice(columns.clone()),
-                        &mut nearest_depth[columns.clone()],
-                        &mut nearest_panel[columns],
+                        &scratch.directions.slice(local.clone()),
+                        &mut scratch.nearest_depth[local.clone()],
+                        &mut scratch.nearest_panel[local],
                     );
                 }
             }
-            active_objects.clear();
-            active_objects.extend(
-                (0..self.objects.len()).filter(|&i| self.objects[i].bounds.contains_row(y)),
-            );
-            for column in 0..width {
-                let panel =
-                    (nearest_panel[column] != NO_PANEL).then_some(nearest_panel[column] as usize);
-                let hit = self.complete_hit(
-                    column as f32,
-                    directions.at(column),
-                    nearest_depth[column],
-                    panel,
-                    &active_objects,
-                );
-                let i = row * width + column;
-                log_intensity[i] = hit.log_intensity;
-                surface[i] = hit.surface;
-                depth[i] = hit.depth;
+        }
+    }
+
+    /// Whether the rays `directions[columns]` of one row all meet panel `i`'s plane behind
+    /// the camera (or never), so that none can hit the panel. `n·d` is linear along a row:
+    /// where it has the same sign at both ends, clear of zero, it has that sign throughout,
+    /// and the distance `offset / n·d` is negative when the signs of offset and `n·d` differ.
+    fn plane_behind(&self, i: usize, directions: &RowDirections, columns: Range<usize>) -> bool {
+        let plane = &self.panel_planes[i];
+        let first = plane.normal.dot(directions.at(columns.start));
+        let last = plane.normal.dot(directions.at(columns.end - 1));
+        let clear = first.abs() > 1e-4 && last.abs() > 1e-4;
+        clear && plane.offset * first < 0.0 && plane.offset * last < 0.0
+    }
+
+    /// Draws the moving objects over `columns` of row `row`, whose static-world log intensity
+    /// `log_intensity` holds (and `surface` zeros): wherever an object is nearer than every
+    /// panel, its shaded log intensity and id replace them. Pixel for pixel the same objects,
+    /// depths and shading as [`Snapshot::trace`].
+    pub fn overlay_objects(
+        &self,
+        row: usize,
+        columns: Range<usize>,
+        log_intensity: &mut [f32],
+        surface: &mut [u16],
+        scratch: &mut RowScratch,
+    ) {
+        let y = row as f32;
+        scratch.active_objects.clear();
+        scratch
+            .active_objects
+            .extend((0..self.objects.len()).filter(|&i| self.objects[i].bounds.contains_row(y)));
+        if scratch.active_objects.is_empty() {
+            return;
+        }
+        let first_column = columns.start;
+        self.nearest_panels(y, columns, scratch);
+        for (k, (log, id)) in log_intensity.iter_mut().zip(surface.iter_mut()).enumerate() {
+            let direction = scratch.directions.at(k);
+            if let Some(hit) = self.nearest_object(
+                (first_column + k) as f32,
+                direction,
+                scratch.nearest_depth[k],
+                &scratch.active_objects,
+            ) {
+                *log = self.shade(&hit.material, direction, hit.depth);
+                *id = hit.id;
+            }
+        }
+    }
+
+    /// Widens `region` (one column range per sensor row; empty where nothing is marked) to
+    /// the hull of itself and every pixel any moving object may cover at this instant.
+    pub fn extend_object_region(&self, region: &mut [Range<usize>]) {
+        let width = self.scene.sensor.width as usize;
+        for object in &self.objects {
+            let bounds = object.bounds;
+            let columns = bounds.columns(width);
+            if columns.is_empty() || bounds.y0.is_nan() || bounds.y1.is_nan() {
+                continue;
+            }
+            let first_row = if bounds.y0 <= 0.0 {
+                0
+            } else {
+                (bounds.y0.ceil() as usize).min(region.len())
+            };
+            let end_row = if bounds.y1 >= region.len() as f32 {
+                region.len()
+            } else {
+                (bounds.y1.floor() as usize + 1).max(first_row)
+            };
+            for range in &mut region[first_row..end_row] {
+                *range = if range.start >= range.end {
+                    columns.clone()
+                } else {
+                    range.start.min(columns.start)..range.end.max(columns.end)
+                };
             }
         }
     }
@@ -332,7 +522,29 @@ impl<'a> Snapshot<'a> {
         let nearest_panel = &mut nearest_panel[..n];
         match panel.half_extent {
             None => {
-                for c in 0..n {
+                // In blocks of fixed length with the selects written as bit masks: LLVM
+                // turned the plain indexed loop into scalar code with a branch per pixel.
+                let blocks = n / LANES * LANES;
+                for start in (0..blocks).step_by(LANES) {
+                    let block = start..start + LANES;
+                    let (bx, by, bz) = (&xs[block.clone()], &ys[block.clone()], &zs[block.clone()]);
+                    let depth = &mut nearest_depth[block.clone()];
+                    let id = &mut nearest_panel[block];
+                    let mut distance = [0.0f32; LANES];
+                    for k in 0..LANES {
+                        distance[k] =
+                            plane.offset / plane.normal.dot(Vec3::new(bx[k], by[k], bz[k]));
+                    }
+                    for k in 0..LANES {
+                        let closer = (distance[k] > 1e-3) & (distance[k] < depth[k]);
+                        let mask = (closer as u32).wrapping_neg();
+                        depth[k] = f32::from_bits(
+                            (distance[k].to_bits() & mask) | (depth[k].to_bits() & !mask),
+                        );
+                        id[k] = (i as u32 & mask) | (id[k] & !mask);
+                    }
+                }
+                for c in blocks..n {
                     let direction = Vec3::new(xs[c], ys[c], zs[c]);
                     let distance = plane.offset / plane.normal.dot(direction);
                     let closer = (distance > 1e-3) & (distance < nearest_depth[c]);
@@ -424,6 +636,31 @@ impl<'a> Snapshot<'a> {
                 log_illumination: self.panel_planes[i].log_illumination,
             }
         });
+        if let Some(hit) = self.nearest_object(x, direction, best.depth, objects) {
+            best.surface = hit.id;
+            best.point = hit.point;
+            best.depth = hit.depth;
+            best_material = Some(hit.material);
+        }
+        if let Some(material) = best_material {
+            best.log_intensity = self.shade(&material, direction, best.depth);
+        }
+        best
+    }
+
+    /// The nearest of the moving objects listed in `objects` that the ray in `direction`
+    /// through column `x` meets closer than `depth_limit`.
+    fn nearest_object(
+        &self,
+        x: f32,
+        direction: Vec3,
+        depth_limit: f32,
+        objects: &[usize],
+    ) -> Option<ObjectHit> {
+        let scene = self.scene;
+        let origin = self.camera.translation;
+        let mut best: Option<ObjectHit> = None;
+        let mut best_depth = depth_limit;
         for &i in objects {
             let placed = &self.objects[i];
             if !placed.bounds.contains_column(x) {
@@ -438,24 +675,24 @@ impl<'a> Snapshot<'a> {
             else {
                 continue;
             };
-            if local_hit.distance >= best.depth {
+            if local_hit.distance >= best_depth {
                 continue;
             }
-            best.surface = i as u16 + 1;
-            best.point = local_origin + local_direction * local_hit.distance;
-            best.depth = local_hit.distance;
+            best_depth = local_hit.distance;
             let normal = placed.pose.rotation.apply(local_hit.normal);
-            best_material = Some(Material {
-                texture: object.texture,
-                texels_per_m: placed.texels_per_m,
-                u: local_hit.u,
-                v: local_hit.v,
-                normal,
-                log_illumination: log_illumination(scene, normal),
+            best = Some(ObjectHit {
+                id: i as u16 + 1,
+                point: local_origin + local_direction * local_hit.distance,
+                depth: local_hit.distance,
+                material: Material {
+                    texture: object.texture,
+                    texels_per_m: placed.texels_per_m,
+                    u: local_hit.u,
+                    v: local_hit.v,
+                    normal,
+                    log_illumination: log_illumination(scene, normal),
+                },
             });
-        }
-        if let Some(material) = best_material {
-            best.log_intensity = self.shade(&material, direction, best.depth);
         }
         best
     }
@@ -487,6 +724,14 @@ struct Material {
     v: f32,
     normal: Vec3,
     log_illumination: f32,
+}
+
+/// A moving object met by a ray: its id, the object-local point, depth and surface.
+struct ObjectHit {
+    id: u16,
+    point: Vec3,
+    depth: f32,
+    material: Material,
 }
 
 struct LocalHit {

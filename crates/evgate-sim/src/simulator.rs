@@ -1,9 +1,16 @@
 //! The simulated event camera: renders the scene as often as its motion requires and turns
 //! log-intensity changes into labelled events, incrementally (`advance`) so it can stream in
 //! real time; also answers ground-truth queries (masks, depth, flow) at any time.
+//!
+//! Each region is sampled at the rate its own motion needs: the static world is rendered
+//! whenever its image has moved by `max-step-px` and its log intensity is interpolated
+//! linearly in between (as ESIM interpolates between any two renders), while the pixels that
+//! moving objects may cover are re-evaluated at the objects' faster rate, with the objects
+//! ray-cast exactly over the interpolated static world.
 
 use std::collections::VecDeque;
 use std::num::NonZeroUsize;
+use std::ops::Range;
 
 use evgate_core::SensorSize;
 use rand::SeedableRng;
@@ -15,11 +22,12 @@ use crate::config::SimConfig;
 use crate::esim::{LabelledEvent, PixelBand, PixelState};
 use crate::noise::NoiseSource;
 use crate::preset::Preset;
-use crate::render::{Frame, Snapshot};
+use crate::render::{Frame, RowScratch, Snapshot};
 use crate::scene::Scene;
 use crate::world::build_scene;
 
-/// Rendering probes image motion over this interval to choose the next step.
+/// Rendering probes image motion over this interval to choose the next step (of the static
+/// world or of the objects).
 const MOTION_PROBE_US: i64 = 1_000;
 /// Row bands per worker thread in a render step: several, so that the cost of expensive
 /// rows spreads over the workers.
@@ -53,8 +61,12 @@ pub enum SimulatorError {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub struct SimStats {
-    /// Renders used to generate events (not counting ground-truth queries).
+    /// Instants at which the image was sampled to generate events (not counting ground-truth
+    /// queries): the objects' rate where objects move, the static world's elsewhere.
     pub renders: u64,
+    /// Full renders of the static world among them (its log intensity is interpolated
+    /// between them).
+    pub background_renders: u64,
     pub events: u64,
     pub on_events: u64,
     /// Events caused by moving objects (label > 0).
@@ -71,7 +83,10 @@ pub struct Simulator {
     rng: ChaCha8Rng,
     state: PixelState,
     noise: NoiseSource,
-    frame: Frame,
+    /// The static world's log intensity at `rendered_us`.
+    background: Vec<f32>,
+    /// The static world's next render (log intensity, surface and depth buffers).
+    next_background: Frame,
     rendered_us: i64,
     delivered_us: i64,
     pending: VecDeque<LabelledEvent>,
@@ -143,6 +158,12 @@ impl Simulator {
             pixels,
             &mut rng,
         );
+        render_parallel(
+            &Snapshot::static_world(&scene, 0.0),
+            &mut frame,
+            config.sensor,
+            threads,
+        );
         Ok(Simulator {
             config,
             seed,
@@ -150,7 +171,8 @@ impl Simulator {
             rng,
             state,
             noise,
-            frame,
+            background: frame.log_intensity.clone(),
+            next_background: frame,
             rendered_us: 0,
             delivered_us: 0,
             pending: VecDeque::new(),
@@ -215,122 +237,110 @@ impl Simulator {
         self.stats.simulated_us = self.delivered_us;
     }
 
-    /// One render step, sized by the fastest image motion.
+    /// One step of the static world, sized by its image motion, with the objects sampled at
+    /// their own rate within it.
     fn step(&mut self) {
         let t0 = self.rendered_us;
-        let t1 = t0 + self.next_step_us(t0);
-        let snapshot = Snapshot::new(&self.scene, t1 as f32 * 1e-6);
+        let t1 = t0 + self.static_step_us(t0);
         let width = self.config.sensor.width as usize;
         let height = self.config.sensor.height as usize;
+        let mut samples = vec![Sample::at(&self.scene, t0, t0, t1)];
+        let mut t = t0;
+        while t < t1 {
+            t = (t + self.object_step_us(t, &samples[samples.len() - 1].snapshot)).min(t1);
+            samples.push(Sample::at(&self.scene, t, t0, t1));
+        }
+        // Pixels outside every object's bounds at every sample see only the static world,
+        // linear in time over the step: one comparison at its end gives all their events.
+        let mut object_region = vec![0..0; height];
+        for sample in &samples {
+            sample.snapshot.extend_object_region(&mut object_region);
+        }
+        let interval = Interval {
+            t0_us: t0,
+            t1_us: t1,
+            background: Snapshot::static_world(&self.scene, t1 as f32 * 1e-6),
+            samples,
+            object_region,
+            width,
+            refractory_us: self.config.events.refractory_us,
+        };
         let rows_per_band = height.div_ceil(self.threads * BANDS_PER_THREAD);
-        let refractory = self.config.events.refractory_us;
         let mut events = Vec::new();
         {
             let bands = self.state.bands(width, rows_per_band);
             let chunk = width * rows_per_band;
-            let frame = &mut self.frame;
-            let jobs = frame
-                .log_intensity
-                .chunks_mut(chunk)
-                .zip(frame.surface.chunks_mut(chunk))
-                .zip(frame.depth.chunks_mut(chunk))
+            let next = &mut self.next_background;
+            let jobs = self
+                .background
+                .chunks(chunk)
+                .zip(next.log_intensity.chunks_mut(chunk))
+                .zip(next.surface.chunks_mut(chunk))
+                .zip(next.depth.chunks_mut(chunk))
                 .zip(bands)
                 .enumerate()
-                .map(|(i, (((log, surface), depth), band))| BandJob {
-                    first_row: i * rows_per_band,
-                    log,
-                    surface,
-                    depth,
-                    band,
-                });
+                .map(
+                    |(i, ((((background, next_background), surface), depth), band))| BandJob {
+                        first_row: i * rows_per_band,
+                        background,
+                        next_background,
+                        surface,
+                        depth,
+                        band,
+                    },
+                );
             // Bands are dealt out in turn, so every worker gets rows from the whole image
-            // (the cost per row varies: objects, near floors); events are then concatenated
-            // in band order, as one thread would produce them.
-            let mut per_worker: Vec<Vec<(usize, BandJob<'_>)>> =
+            // (the cost per row varies: objects, near floors).
+            let mut per_worker: Vec<Vec<BandJob<'_>>> =
                 (0..self.threads).map(|_| Vec::new()).collect();
             for (i, job) in jobs.enumerate() {
-                per_worker[i % self.threads].push((i, job));
+                per_worker[i % self.threads].push(job);
             }
-            let snapshot = &snapshot;
-            let run_all = move |list: Vec<(usize, BandJob<'_>)>| {
-                list.into_iter()
-                    .map(|(i, job)| (i, job.run(snapshot, t0, t1, refractory)))
-                    .collect::<Vec<_>>()
+            let interval = &interval;
+            let run_all = move |list: Vec<BandJob<'_>>| {
+                let mut out = Vec::new();
+                let mut scratch = interval.background.row_scratch();
+                for job in list {
+                    job.run(interval, &mut scratch, &mut out);
+                }
+                out
             };
-            let mut band_events: Vec<(usize, Vec<LabelledEvent>)> = std::thread::scope(|scope| {
+            std::thread::scope(|scope| {
                 let mut lists = per_worker.into_iter();
                 let own = lists.next().unwrap_or_default();
                 let helpers: Vec<_> = lists
                     .map(|list| scope.spawn(move || run_all(list)))
                     .collect();
-                let mut done = run_all(own);
+                events = run_all(own);
                 for helper in helpers {
-                    done.extend(
+                    events.extend(
                         helper
                             .join()
                             .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
                     );
                 }
-                done
             });
-            band_events.sort_unstable_by_key(|(i, _)| *i);
-            for (_, mut band) in band_events {
-                events.append(&mut band);
-            }
         }
+        std::mem::swap(
+            &mut self.background,
+            &mut self.next_background.log_intensity,
+        );
+        let refractory = self.config.events.refractory_us;
         self.noise
             .emit(t1, refractory, &mut self.state, &mut self.rng, &mut events);
-        events.sort_by_key(|e| e.event.t);
+        // Time, then row and column: the order does not depend on how rows were shared out
+        // (a stable sort keeps one pixel's events in the order it produced them).
+        events.sort_by_key(|e| (e.event.t, e.event.y, e.event.x));
         self.pending.extend(events);
         self.rendered_us = t1;
-        self.stats.renders += 1;
+        self.stats.renders += interval.samples.len() as u64 - 1;
+        self.stats.background_renders += 1;
     }
 
-    /// The step from `t_us` that keeps the largest image displacement of the static world (a
-    /// grid of sample pixels) and of every object's bounding-box corners within `max-step-px`.
-    fn next_step_us(&self, t_us: i64) -> i64 {
+    /// Largest image displacement of the points in `now` after [`MOTION_PROBE_US`] in
+    /// `later`, as a step that keeps it within `max-step-px`.
+    fn step_for_shift(&self, max_shift: f32) -> i64 {
         let model = &self.config.events;
-        let now = Snapshot::new(&self.scene, t_us as f32 * 1e-6);
-        let later = Snapshot::new(&self.scene, (t_us + MOTION_PROBE_US) as f32 * 1e-6);
-        let k = &self.config.intrinsics;
-        let mut max_shift = 0.0f32;
-        let mut consider = |a: Option<(f32, f32)>, b: Option<(f32, f32)>| {
-            if let (Some(a), Some(b)) = (a, b) {
-                max_shift = max_shift.max(((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt());
-            }
-        };
-        let sensor = self.config.sensor;
-        for y in (MOTION_PROBE_GRID_PX / 2..sensor.height as usize).step_by(MOTION_PROBE_GRID_PX) {
-            for x in (MOTION_PROBE_GRID_PX / 2..sensor.width as usize).step_by(MOTION_PROBE_GRID_PX)
-            {
-                let hit = now.trace(x as f32, y as f32);
-                if hit.surface == 0 && hit.depth.is_finite() {
-                    consider(
-                        Some((x as f32, y as f32)),
-                        project_world(k, later.camera(), hit.point),
-                    );
-                }
-            }
-        }
-        for (i, object) in self.scene.objects.iter().enumerate() {
-            let id = i as u16 + 1;
-            for corner in object.shape.corners() {
-                let before = project_world(k, now.camera(), now.object_pose(id).to_world(corner));
-                let after =
-                    project_world(k, later.camera(), later.object_pose(id).to_world(corner));
-                let on_screen = |p: Option<(f32, f32)>| {
-                    p.is_some_and(|(x, y)| {
-                        x > -50.0
-                            && y > -50.0
-                            && x < sensor.width as f32 + 50.0
-                            && y < sensor.height as f32 + 50.0
-                    })
-                };
-                if on_screen(before) || on_screen(after) {
-                    consider(before, after);
-                }
-            }
-        }
         let speed_px_per_us = max_shift / MOTION_PROBE_US as f32;
         let step = if speed_px_per_us > 0.0 {
             (model.max_step_px / speed_px_per_us) as i64
@@ -338,6 +348,60 @@ impl Simulator {
             model.max_step_us
         };
         step.clamp(model.min_step_us, model.max_step_us)
+    }
+
+    /// The step from `t_us` that keeps the largest image displacement of the static world (a
+    /// grid of sample pixels) within `max-step-px`.
+    fn static_step_us(&self, t_us: i64) -> i64 {
+        let now = Snapshot::static_world(&self.scene, t_us as f32 * 1e-6);
+        let later = Snapshot::static_world(&self.scene, (t_us + MOTION_PROBE_US) as f32 * 1e-6);
+        let k = &self.config.intrinsics;
+        let sensor = self.config.sensor;
+        let mut max_shift = 0.0f32;
+        for y in (MOTION_PROBE_GRID_PX / 2..sensor.height as usize).step_by(MOTION_PROBE_GRID_PX) {
+            for x in (MOTION_PROBE_GRID_PX / 2..sensor.width as usize).step_by(MOTION_PROBE_GRID_PX)
+            {
+                let hit = now.trace(x as f32, y as f32);
+                if hit.depth.is_finite() {
+                    if let Some(b) = project_world(k, later.camera(), hit.point) {
+                        max_shift = max_shift.max(shift((x as f32, y as f32), b));
+                    }
+                }
+            }
+        }
+        self.step_for_shift(max_shift)
+    }
+
+    /// The step from `t_us` (whose snapshot is `now`) that keeps the largest image
+    /// displacement of every object's bounding-box corners near the view within
+    /// `max-step-px`.
+    fn object_step_us(&self, t_us: i64, now: &Snapshot<'_>) -> i64 {
+        let later = Snapshot::new(&self.scene, (t_us + MOTION_PROBE_US) as f32 * 1e-6);
+        let k = &self.config.intrinsics;
+        let sensor = self.config.sensor;
+        let on_screen = |p: Option<(f32, f32)>| {
+            p.is_some_and(|(x, y)| {
+                x > -50.0
+                    && y > -50.0
+                    && x < sensor.width as f32 + 50.0
+                    && y < sensor.height as f32 + 50.0
+            })
+        };
+        let mut max_shift = 0.0f32;
+        for (i, object) in self.scene.objects.iter().enumerate() {
+            let id = i as u16 + 1;
+            for corner in object.shape.corners() {
+                let before = project_world(k, now.camera(), now.object_pose(id).to_world(corner));
+                let after =
+                    project_world(k, later.camera(), later.object_pose(id).to_world(corner));
+                if let (true, Some(a), Some(b)) =
+                    (on_screen(before) || on_screen(after), before, after)
+                {
+                    max_shift = max_shift.max(shift(a, b));
+                }
+            }
+        }
+        self.step_for_shift(max_shift)
     }
 
     /// Renders the scene at `t_us` (log intensity, surface id, depth) without touching the
@@ -405,10 +469,48 @@ impl Simulator {
     }
 }
 
-/// One worker's share of a render step: a band of rows, rendered then compared with its state.
+fn shift(a: (f32, f32), b: (f32, f32)) -> f32 {
+    ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt()
+}
+
+/// An instant at which the objects are sampled within a step of the static world.
+struct Sample<'a> {
+    t_us: i64,
+    /// Where `t_us` lies between the static world's renders (0 at the first, 1 at the second).
+    fraction: f32,
+    snapshot: Snapshot<'a>,
+}
+
+impl<'a> Sample<'a> {
+    fn at(scene: &'a Scene, t_us: i64, t0_us: i64, t1_us: i64) -> Sample<'a> {
+        Sample {
+            t_us,
+            fraction: (t_us - t0_us) as f32 / (t1_us - t0_us) as f32,
+            snapshot: Snapshot::new(scene, t_us as f32 * 1e-6),
+        }
+    }
+}
+
+/// One step of the static world from `t0_us` to `t1_us` and the object samples within it.
+struct Interval<'a> {
+    t0_us: i64,
+    t1_us: i64,
+    /// The static world at `t1_us`.
+    background: Snapshot<'a>,
+    /// From `t0_us` to `t1_us`.
+    samples: Vec<Sample<'a>>,
+    /// Per row, the columns that some object may cover at some sample.
+    object_region: Vec<Range<usize>>,
+    width: usize,
+    refractory_us: i64,
+}
+
+/// One worker's share of a step: a band of rows, rendered then compared with its state.
 struct BandJob<'a> {
     first_row: usize,
-    log: &'a mut [f32],
+    /// The static world at the step's start, and its render at the end (written here).
+    background: &'a [f32],
+    next_background: &'a mut [f32],
     surface: &'a mut [u16],
     depth: &'a mut [f32],
     band: PixelBand<'a>,
@@ -417,22 +519,72 @@ struct BandJob<'a> {
 impl BandJob<'_> {
     fn run(
         mut self,
-        snapshot: &Snapshot<'_>,
-        t0_us: i64,
-        t1_us: i64,
-        refractory_us: i64,
-    ) -> Vec<LabelledEvent> {
-        let mut out = Vec::new();
-        snapshot.render_rows(self.first_row, self.log, self.surface, self.depth);
-        self.band.emit(
-            self.log,
+        interval: &Interval<'_>,
+        scratch: &mut RowScratch,
+        out: &mut Vec<LabelledEvent>,
+    ) {
+        interval.background.render_rows_with(
+            self.first_row,
+            self.next_background,
             self.surface,
-            t0_us,
-            t1_us,
-            refractory_us,
-            &mut out,
+            self.depth,
+            scratch,
         );
-        out
+        let width = interval.width;
+        let rows = self.background.len() / width;
+        let refractory = interval.refractory_us;
+        let mut log_intensity = vec![0.0f32; width];
+        let mut surface = vec![0u16; width];
+        for pair in interval.samples.windows(2) {
+            let (before, sample) = (&pair[0], &pair[1]);
+            let (keep, take) = (1.0 - sample.fraction, sample.fraction);
+            for row in 0..rows {
+                let columns = interval.object_region[self.first_row + row].clone();
+                if columns.is_empty() {
+                    continue;
+                }
+                let offset = row * width;
+                for c in columns.clone() {
+                    // Exactly the next render at the last sample (take = 1, keep = 0).
+                    log_intensity[c] = self.background[offset + c] * keep
+                        + self.next_background[offset + c] * take;
+                    surface[c] = 0;
+                }
+                sample.snapshot.overlay_objects(
+                    self.first_row + row,
+                    columns.clone(),
+                    &mut log_intensity[columns.clone()],
+                    &mut surface[columns.clone()],
+                    scratch,
+                );
+                for c in columns {
+                    self.band.emit_pixel(
+                        offset + c,
+                        log_intensity[c],
+                        surface[c],
+                        before.t_us,
+                        sample.t_us,
+                        refractory,
+                        out,
+                    );
+                }
+            }
+        }
+        for row in 0..rows {
+            let columns = &interval.object_region[self.first_row + row];
+            let offset = row * width;
+            for c in (0..columns.start).chain(columns.end..width) {
+                self.band.emit_pixel(
+                    offset + c,
+                    self.next_background[offset + c],
+                    0,
+                    interval.t0_us,
+                    interval.t1_us,
+                    refractory,
+                    out,
+                );
+            }
+        }
     }
 }
 

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::preset::Preset;
 
 /// Bumped whenever the plan or the simulator's output for a given seed changes.
-pub const SUITE_VERSION: &str = "evgate-sim-suite/3";
+pub const SUITE_VERSION: &str = "evgate-sim-suite/4";
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

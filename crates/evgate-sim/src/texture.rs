@@ -44,15 +44,31 @@ pub struct Texture {
 struct Level {
     size: usize,
     texels: Vec<f32>,
+    /// For each texel, itself and its right, lower and lower-right neighbours (wrapping):
+    /// a bilinear sample reads one 16-byte entry instead of four scattered texels.
+    quads: Vec<[f32; 4]>,
 }
 
 impl Level {
-    fn at(&self, x: i32, y: i32) -> f32 {
-        let mask = self.size as i32 - 1;
-        let index = (y & mask) as usize * self.size + (x & mask) as usize;
-        // `texels` holds size² (a power of two) values, so the index is already below that;
-        // masking it again lets the compiler drop the bounds check of this hot lookup.
-        self.texels[index & (self.texels.len() - 1)]
+    fn new(size: usize, texels: Vec<f32>) -> Level {
+        let mask = size - 1;
+        let quads = (0..size * size)
+            .map(|index| {
+                let (x, y) = (index & mask, index / size);
+                let (right, below) = ((x + 1) & mask, ((y + 1) & mask) * size);
+                [
+                    texels[y * size + x],
+                    texels[y * size + right],
+                    texels[below + x],
+                    texels[below + right],
+                ]
+            })
+            .collect();
+        Level {
+            size,
+            texels,
+            quads,
+        }
     }
 
     /// Bilinear sample at continuous texel coordinates, wrapping around the edges.
@@ -62,8 +78,13 @@ impl Level {
         let (ix, iy) = (fast_floor(x), fast_floor(y));
         let fx = x - ix as f32;
         let fy = y - iy as f32;
-        let top = self.at(ix, iy) * (1.0 - fx) + self.at(ix + 1, iy) * fx;
-        let bottom = self.at(ix, iy + 1) * (1.0 - fx) + self.at(ix + 1, iy + 1) * fx;
+        let mask = self.size as i32 - 1;
+        let index = (iy & mask) as usize * self.size + (ix & mask) as usize;
+        // `quads` holds size² (a power of two) entries, so the index is already below that;
+        // masking it again lets the compiler drop the bounds check of this hot lookup.
+        let [a, b, c, d] = self.quads[index & (self.quads.len() - 1)];
+        let top = a * (1.0 - fx) + b * fx;
+        let bottom = c * (1.0 - fx) + d * fx;
         top * (1.0 - fy) + bottom * fy
     }
 
@@ -81,7 +102,7 @@ impl Level {
                         + self.texels[(sy + 1) * n + sx + 1]);
             }
         }
-        Level { size, texels }
+        Level::new(size, texels)
     }
 }
 
@@ -89,7 +110,7 @@ impl Texture {
     /// Builds a texture from level-0 log-reflectance texels (`size` must be a power of two).
     pub fn from_texels(size: usize, texels: Vec<f32>) -> Texture {
         assert!(size.is_power_of_two() && texels.len() == size * size);
-        let mut levels = vec![Level { size, texels }];
+        let mut levels = vec![Level::new(size, texels)];
         while levels.last().map(|l| l.size).unwrap_or(1) > 1 {
             let next = levels
                 .last()
