@@ -170,7 +170,7 @@ class SuppressionNetwork(nn.Module):
         coarse_velocity = self.flow_decoder(conditioned, flow_skips)
         velocity = upsample(coarse_velocity, self.flow_stride)
         # Upsampling is linear, so scaling by the horizon before it gives the same flow with a
-        # full-resolution multiply less per horizon; the exported graph keeps only this path.
+        # full-resolution multiply less per horizon.
         coarse_flow = coarse_velocity * flat_horizons.view(-1, 1, 1, 1)
         flow = upsample(coarse_flow, self.flow_stride)
         if warp_resolution == "full":

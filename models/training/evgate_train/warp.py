@@ -23,7 +23,6 @@ def backward_warp(image: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
     return F.grid_sample(image, grid, mode="bilinear", padding_mode="zeros", align_corners=True)
 
 
-
 def normalising_scale(height: int, width: int) -> torch.Tensor:
     """[1, 2, 1, 1]: multiplies a flow [N, 2, H, W] in pixels into grid_sample's normalised units
     (align_corners off, where the image spans [-1, 1] over `width` x `height` pixels)."""
