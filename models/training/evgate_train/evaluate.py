@@ -27,6 +27,7 @@ from .checkpoint import load_checkpoint
 from .linear_extrapolation import extrapolate
 from .metrics import SequenceScores, frame_scores
 from .network import WARP_RESOLUTIONS, SuppressionNetwork
+from .onnx_network import OnnxNetwork, load_export
 from .sequence import Sequence, load_sequence
 from .voxel import WINDOW_US, padded, voxel_grid
 
@@ -41,13 +42,15 @@ class EvaluationSetupError(ValueError):
 def parse_model(spec: str) -> tuple[str, Path]:
     name, separator, path = spec.partition("=")
     if not separator or not name or not path:
-        raise EvaluationSetupError(f"--model {spec!r}: expected NAME=CHECKPOINT, e.g. full=runs/S/checkpoint.pt")
+        raise EvaluationSetupError(
+            f"--model {spec!r}: expected NAME=CHECKPOINT or NAME=EXPORT.onnx, e.g. full=runs/S/checkpoint.pt"
+        )
     return name, Path(path)
 
 
 @torch.no_grad()
 def evaluate_sequence(
-    network: SuppressionNetwork,
+    network: SuppressionNetwork | OnnxNetwork,
     sequence: Sequence,
     horizons_ms: list[float],
     with_baselines: bool,
@@ -125,7 +128,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, required=True, help="directory searched recursively for .npz sequences")
     parser.add_argument(
-        "--model", action="append", required=True, help="NAME=CHECKPOINT; repeatable; the first also gives the baselines"
+        "--model",
+        action="append",
+        required=True,
+        help="NAME=CHECKPOINT or NAME=EXPORT.onnx (run through ONNX Runtime as exported); repeatable; the first "
+        "also gives the baselines",
     )
     parser.add_argument("--horizons-ms", default="100", help="comma-separated forecast horizons to score (ms)")
     parser.add_argument("--presets", default="", help="comma-separated presets to keep (default: all)")
@@ -135,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
         "--warp-resolution",
         choices=WARP_RESOLUTIONS,
         default="full",
-        help="where the future mask logits are warped: full (training) or half (what an export does by default)",
+        help="where a checkpoint's future mask logits are warped: full (training) or half (what an export does by "
+        "default); an .onnx model keeps the warp it was exported with",
     )
     parser.add_argument("--output", type=Path, required=True, help="JSON report path")
     args = parser.parse_args(argv)
@@ -154,7 +162,14 @@ def main(argv: list[str] | None = None) -> int:
         "models": {},
         "sequences": [str(p) for p in paths],
     }
-    networks = [(name, load_checkpoint(path)) for name, path in models]
+    networks = [
+        (name, load_export(path, args.threads) if path.suffix == ".onnx" else load_checkpoint(path)) for name, path in models
+    ]
+
+    def warp_resolution_of(checkpoint) -> str:
+        network = checkpoint.network
+        return network.warp_resolution if isinstance(network, OnnxNetwork) else args.warp_resolution
+
     results: dict[str, list] = defaultdict(list)
     for path in tqdm(paths, desc="evaluate", unit="seq"):
         sequence = load_sequence(path)
@@ -167,12 +182,13 @@ def main(argv: list[str] | None = None) -> int:
                 horizons,
                 with_baselines=index == 0,
                 max_seconds=args.max_seconds,
-                warp_resolution=args.warp_resolution,
+                warp_resolution=warp_resolution_of(checkpoint),
             )
             results[name].append((sequence.preset, {key: s.summary() for key, s in scores.items()}))
     for name, checkpoint in networks:
         report["models"][name] = {
             "checkpoint": str(dict(models)[name]),
+            "warp_resolution": warp_resolution_of(checkpoint),
             "steps": checkpoint.step,
             "time-conditioning": checkpoint.network.config.time_conditioning,
             "size": checkpoint.network.config.size,

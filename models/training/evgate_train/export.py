@@ -17,6 +17,7 @@ import torch
 from torch import nn
 
 from .checkpoint import load_checkpoint
+from .graph_rewrite import split_concatenated_convolutions
 from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork, check_input_size, check_warp_resolution
 from .voxel import WINDOW_US
 
@@ -81,6 +82,8 @@ def export(
             dynamo=False,
         )
     model = onnx.load(str(path))
+    split = split_concatenated_convolutions(model)
+    log.info("split %d convolutions of concatenated inputs", split)
     config = network.config
     metadata = {
         "evgate.model-size": config.size,

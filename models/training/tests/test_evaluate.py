@@ -5,7 +5,9 @@ import torch
 
 from evgate_train.checkpoint import save_checkpoint
 from evgate_train.evaluate import EvaluationSetupError, evaluate_sequence, main, parse_model
+from evgate_train.export import export
 from evgate_train.network import NetworkConfig, SuppressionNetwork
+from evgate_train.onnx_network import ExportError, load_export
 from evgate_train.sequence import load_sequence
 
 
@@ -39,3 +41,42 @@ def test_report_is_written_per_preset(synthetic_dir, tmp_path):
 def test_bad_model_spec_is_explained():
     with pytest.raises(EvaluationSetupError, match="expected NAME=CHECKPOINT"):
         parse_model("runs/S/checkpoint.pt")
+
+
+def _perturbed_xs_network() -> SuppressionNetwork:
+    torch.manual_seed(2)
+    network = SuppressionNetwork(NetworkConfig(size="XS")).eval()
+    with torch.no_grad():
+        for parameter in network.parameters():
+            parameter.add_(0.05 * torch.randn_like(parameter))
+    return network
+
+
+def test_an_export_scores_like_its_checkpoint(synthetic_dir, tmp_path):
+    network = _perturbed_xs_network()
+    checkpoint = tmp_path / "xs.pt"
+    save_checkpoint(checkpoint, network, None, 5, "cd" * 32, {})
+    exported = tmp_path / "xs.onnx"
+    export(network, exported, 48, 96, "cd" * 32, 5, warp_resolution="half")
+    report_path = tmp_path / "report.json"
+    main([
+        "--data", str(synthetic_dir), "--model", f"checkpoint={checkpoint}", "--model", f"export={exported}",
+        "--warp-resolution", "half", "--horizons-ms", "50,100", "--max-seconds", "0.3", "--output", str(report_path),
+    ])
+    models = json.loads(report_path.read_text())["models"]
+    assert models["export"]["warp_resolution"] == "half" and models["export"]["steps"] == 5
+    for key in ("current", "future-50ms", "future-100ms"):
+        want = models["checkpoint"]["presets"]["synthetic-test"][key]
+        got = models["export"]["presets"]["synthetic-test"][key]
+        assert got == pytest.approx(want, abs=1e-3, nan_ok=True), key
+
+
+def test_an_export_refuses_another_warp_resolution_or_size(tmp_path):
+    exported = tmp_path / "xs.onnx"
+    export(_perturbed_xs_network(), exported, 48, 96, "cd" * 32, 5, warp_resolution="half")
+    network = load_export(exported, threads=1).network
+    with pytest.raises(ExportError, match="exported for one stream of 96x48"):
+        network.initial_states(1, 64, 96)
+    states = network.initial_states(1, 48, 96)
+    with pytest.raises(ExportError, match="exported with warp resolution half; full was asked for"):
+        network(torch.zeros(1, 2, 48, 96), torch.tensor([[50.0]]), states, "full")

@@ -56,6 +56,8 @@ def test_contract_names_and_metadata(exported):
     assert metadata["evgate.train-manifest-sha256"] == "ab" * 32
     assert metadata["evgate.warp-resolution"] == warp_resolution
     assert metadata["evgate.flow-stride"] == "8"
+    # The decoders' convolutions of features + prediction (8 + 1, 8 + 2 channels) were split.
+    assert sum(node.name.endswith("/input_part_1") for node in onnx.load(str(path)).graph.node) >= 2
     flow = next(o for o in session.get_outputs() if o.name == "future_flow")
     assert flow.shape[2:] == [2, HEIGHT // 8, WIDTH // 8]
     assert {"evgate.bins", "evgate.window-ms", "evgate.max-horizon-ms", "evgate.base-channels"} <= metadata.keys()
