@@ -72,6 +72,7 @@ impl Level {
     }
 
     /// Bilinear sample at continuous texel coordinates, wrapping around the edges.
+    #[inline(always)]
     fn bilinear(&self, u: f32, v: f32) -> f32 {
         let x = u - 0.5;
         let y = v - 0.5;
@@ -141,6 +142,7 @@ impl Texture {
 
     /// Log reflectance at level-0 texel coordinates (u, v), filtered for a pixel footprint of
     /// `footprint` texels (trilinear between the two nearest mip levels).
+    #[inline(always)]
     pub fn sample(&self, u: f32, v: f32, footprint: f32) -> f32 {
         if footprint <= 1.0 {
             return self.levels[0].bilinear(u, v);
