@@ -1,6 +1,8 @@
 //! ESIM-style pixel model: each pixel memorises the log intensity at its last event and fires
 //! one event per threshold crossing, timed by linear interpolation between two renders.
 
+use std::ops::Range;
+
 use evgate_core::Event;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -150,6 +152,51 @@ impl PixelBand<'_> {
         }
         self.previous[i] = l1;
         self.previous_surface[i] = surface;
+    }
+
+    /// [`PixelBand::emit_pixel`] on the static world (surface 0) for the band's pixels
+    /// `pixels`, whose values at `t1_us` are `log_intensity`. The threshold tests run over
+    /// blocks of pixels in a loop the compiler vectorises; only blocks with a crossing are
+    /// visited pixel by pixel.
+    pub fn emit_static_run(
+        &mut self,
+        pixels: Range<usize>,
+        log_intensity: &[f32],
+        t0_us: i64,
+        t1_us: i64,
+        refractory_us: i64,
+        out: &mut Vec<LabelledEvent>,
+    ) {
+        const BLOCK: usize = 8;
+        let first = pixels.start;
+        for start in (0..pixels.len()).step_by(BLOCK) {
+            let end = (start + BLOCK).min(pixels.len());
+            let block = first + start..first + end;
+            let crossing = log_intensity[start..end]
+                .iter()
+                .zip(&self.reference[block.clone()])
+                .zip(
+                    self.threshold_on[block.clone()]
+                        .iter()
+                        .zip(&self.threshold_off[block]),
+                )
+                .fold(false, |any, ((&l1, &reference), (&on, &off))| {
+                    any | (l1 - reference >= on) | (reference - l1 >= off)
+                });
+            if crossing {
+                for k in start..end {
+                    let (i, l1) = (first + k, log_intensity[k]);
+                    let reference = self.reference[i];
+                    if l1 - reference >= self.threshold_on[i]
+                        || reference - l1 >= self.threshold_off[i]
+                    {
+                        self.fire(i, l1, 0, t0_us, t1_us, refractory_us, out);
+                    }
+                }
+            }
+        }
+        self.previous[pixels.clone()].copy_from_slice(log_intensity);
+        self.previous_surface[pixels].fill(0);
     }
 
     /// The events of pixel `i` crossing one or more thresholds on its way to `l1`.

@@ -573,11 +573,11 @@ impl BandJob<'_> {
         for row in 0..rows {
             let columns = &interval.object_region[self.first_row + row];
             let offset = row * width;
-            for c in (0..columns.start).chain(columns.end..width) {
-                self.band.emit_pixel(
-                    offset + c,
-                    self.next_background[offset + c],
-                    0,
+            for static_columns in [0..columns.start, columns.end..width] {
+                let pixels = offset + static_columns.start..offset + static_columns.end;
+                self.band.emit_static_run(
+                    pixels.clone(),
+                    &self.next_background[pixels],
                     interval.t0_us,
                     interval.t1_us,
                     refractory,
