@@ -184,8 +184,7 @@ impl PixelBand<'_> {
                     any | (l1 - reference >= on) | (reference - l1 >= off)
                 });
             if crossing {
-                for k in start..end {
-                    let (i, l1) = (first + k, log_intensity[k]);
+                for (i, &l1) in (first + start..).zip(&log_intensity[start..end]) {
                     let reference = self.reference[i];
                     if l1 - reference >= self.threshold_on[i]
                         || reference - l1 >= self.threshold_off[i]
