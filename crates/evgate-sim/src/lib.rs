@@ -16,6 +16,7 @@
 //! let flow = sim.flow(50_000, 20_000);
 //! ```
 
+pub mod atlas;
 pub mod camera;
 pub mod config;
 pub mod esim;

@@ -3,6 +3,7 @@
 
 use evgate_core::SensorSize;
 
+use crate::atlas::TextureAtlas;
 use crate::camera::Intrinsics;
 use crate::linalg::Vec3;
 use crate::motion::{EgoMotion, ObjectPath};
@@ -74,6 +75,8 @@ pub struct Scene {
     pub panels: Vec<Panel>,
     pub objects: Vec<MovingObject>,
     pub textures: Vec<Texture>,
+    /// The same textures in one array, for sampling eight pixels at once.
+    pub atlas: TextureAtlas,
     /// Unit direction towards a distant light, in world coordinates.
     pub light: Vec3,
     /// Share of light that reaches every surface regardless of orientation.

@@ -135,6 +135,11 @@ impl Texture {
         Texture::from_texels(size, texels)
     }
 
+    /// The texel quads of each mip level, finest first (see `Level::quads`).
+    pub fn level_quads(&self) -> Vec<&[[f32; 4]]> {
+        self.levels.iter().map(|level| &level.quads[..]).collect()
+    }
+
     /// Side of level 0 in texels.
     pub fn size(&self) -> usize {
         self.levels[0].size

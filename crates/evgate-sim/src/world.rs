@@ -3,6 +3,7 @@
 
 use rand::Rng;
 
+use crate::atlas::TextureAtlas;
 use crate::camera::project_world;
 use crate::config::{Layout, SceneParams, SimConfig};
 use crate::linalg::{Mat3, RigidTransform, Vec3};
@@ -154,6 +155,7 @@ pub fn build_scene(config: &SimConfig, rng: &mut impl Rng) -> Scene {
         ego,
         panels,
         objects,
+        atlas: TextureAtlas::new(&textures),
         textures,
         light: Vec3::new(rng.gen_range(-0.5..0.5), -1.0, rng.gen_range(-0.8..-0.2)).normalized(),
         ambient: 0.45,

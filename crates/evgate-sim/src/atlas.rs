@@ -1,0 +1,171 @@
+//! Every texel quad of every texture of a scene in one array, so that eight texture samples
+//! (of any textures and mip levels) are taken at once with AVX2 gathers. The same operations
+//! in the same order as [`Texture::sample`], hence the same bits.
+
+use crate::texture::Texture;
+
+/// Most mip levels per texture (a 32768-texel texture has 16).
+const MAX_LEVELS: usize = 16;
+
+/// The texel quads of all textures' mip levels, and where each level starts.
+#[derive(Clone, Debug, Default)]
+pub struct TextureAtlas {
+    quads: Vec<[f32; 4]>,
+    /// Index in `quads` of level l of texture t at `t * MAX_LEVELS + l`.
+    level_starts: Vec<i32>,
+    /// Per texture: log2 of the side of its level 0.
+    size_log2: Vec<i32>,
+    /// Per texture: its number of mip levels.
+    level_counts: Vec<i32>,
+}
+
+impl TextureAtlas {
+    pub fn new(textures: &[Texture]) -> TextureAtlas {
+        let mut atlas = TextureAtlas::default();
+        for texture in textures {
+            let levels = texture.level_quads();
+            assert!(
+                levels.len() <= MAX_LEVELS,
+                "a texture of side {} has more than {MAX_LEVELS} mip levels",
+                texture.size()
+            );
+            let mut starts = [0i32; MAX_LEVELS];
+            for (start, quads) in starts.iter_mut().zip(&levels) {
+                *start = i32::try_from(atlas.quads.len()).expect("texture atlas under 2^31 quads");
+                atlas.quads.extend_from_slice(quads);
+            }
+            atlas.level_starts.extend_from_slice(&starts);
+            atlas.size_log2.push(texture.size().trailing_zeros() as i32);
+            atlas.level_counts.push(levels.len() as i32);
+        }
+        // Gathers address single floats with 32-bit indices.
+        assert!(atlas.quads.len() < (i32::MAX / 4) as usize);
+        atlas
+    }
+
+    /// [`Texture::sample`] for eight lanes at once: texture `texture[k]` at (`u[k]`, `v[k]`)
+    /// with footprint `footprint[k]` (texture indices must be valid).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn sample8(
+        &self,
+        texture: &[i32; 8],
+        u: &[f32; 8],
+        v: &[f32; 8],
+        footprint: &[f32; 8],
+    ) -> [f32; 8] {
+        use std::arch::x86_64::*;
+        for &t in texture {
+            assert!((t as usize) < self.level_counts.len(), "texture {t}");
+        }
+        let texture = _mm256_loadu_si256(texture.as_ptr().cast());
+        let (u, v) = (_mm256_loadu_ps(u.as_ptr()), _mm256_loadu_ps(v.as_ptr()));
+        let footprint = _mm256_loadu_ps(footprint.as_ptr());
+        // SAFETY (all gathers): every index is a valid texture (asserted above), a level
+        // below its count, or a quad inside that level (masked by its size).
+        let level_counts = _mm256_i32gather_epi32::<4>(self.level_counts.as_ptr(), texture);
+        let size_log2 = _mm256_i32gather_epi32::<4>(self.size_log2.as_ptr(), texture);
+        let one_i = _mm256_set1_epi32(1);
+        // approximate_log2(footprint), clamped to the coarsest level.
+        let bits = _mm256_castps_si256(footprint);
+        let exponent = _mm256_sub_ps(
+            _mm256_cvtepi32_ps(_mm256_and_si256(
+                _mm256_srli_epi32::<23>(bits),
+                _mm256_set1_epi32(0xff),
+            )),
+            _mm256_set1_ps(127.0),
+        );
+        let mantissa = _mm256_castsi256_ps(_mm256_or_si256(
+            _mm256_and_si256(bits, _mm256_set1_epi32(0x007f_ffff)),
+            _mm256_set1_epi32(0x3f80_0000),
+        ));
+        let log2 = _mm256_sub_ps(_mm256_add_ps(exponent, mantissa), _mm256_set1_ps(1.0));
+        let coarsest = _mm256_cvtepi32_ps(_mm256_sub_epi32(level_counts, one_i));
+        let level = _mm256_min_ps(log2, coarsest);
+        // Footprints up to one texel read level 0 with coordinates scaled by 1.0 (exact).
+        let fine_only = _mm256_cmp_ps::<_CMP_LE_OQ>(footprint, _mm256_set1_ps(1.0));
+        let fine_only_i = _mm256_castps_si256(fine_only);
+        let fine = _mm256_andnot_si256(fine_only_i, _mm256_cvttps_epi32(level));
+        let blend = _mm256_sub_ps(level, _mm256_cvtepi32_ps(fine));
+        let scale = _mm256_castsi256_ps(_mm256_slli_epi32::<23>(_mm256_sub_epi32(
+            _mm256_set1_epi32(127),
+            fine,
+        )));
+        let (us, vs) = (_mm256_mul_ps(u, scale), _mm256_mul_ps(v, scale));
+        let a = self.bilinear8(texture, size_log2, fine, us, vs);
+        let next = _mm256_add_epi32(fine, one_i);
+        let has_next = _mm256_cmpgt_epi32(level_counts, next);
+        let blends = _mm256_cmp_ps::<_CMP_NEQ_UQ>(blend, _mm256_setzero_ps());
+        let use_coarser = _mm256_and_ps(
+            _mm256_andnot_ps(fine_only, _mm256_castsi256_ps(has_next)),
+            blends,
+        );
+        let coarser_level = _mm256_min_epi32(next, _mm256_sub_epi32(level_counts, one_i));
+        let half = _mm256_set1_ps(0.5);
+        let b = self.bilinear8(
+            texture,
+            size_log2,
+            coarser_level,
+            _mm256_mul_ps(us, half),
+            _mm256_mul_ps(vs, half),
+        );
+        let mixed = _mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), blend));
+        let mut out = [0.0f32; 8];
+        _mm256_storeu_ps(out.as_mut_ptr(), _mm256_blendv_ps(a, mixed, use_coarser));
+        out
+    }
+
+    /// `Level::bilinear` of level `level` of `texture`, for eight lanes.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn bilinear8(
+        &self,
+        texture: std::arch::x86_64::__m256i,
+        size_log2: std::arch::x86_64::__m256i,
+        level: std::arch::x86_64::__m256i,
+        u: std::arch::x86_64::__m256,
+        v: std::arch::x86_64::__m256,
+    ) -> std::arch::x86_64::__m256 {
+        use std::arch::x86_64::*;
+        let half = _mm256_set1_ps(0.5);
+        let (x, y) = (_mm256_sub_ps(u, half), _mm256_sub_ps(v, half));
+        // fast_floor: truncate, minus one where the truncation rounded up.
+        let floor = |value: __m256| {
+            let truncated = _mm256_cvttps_epi32(value);
+            let rounded_up = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_cvtepi32_ps(truncated), value);
+            _mm256_add_epi32(truncated, _mm256_castps_si256(rounded_up))
+        };
+        let (ix, iy) = (floor(x), floor(y));
+        let fx = _mm256_sub_ps(x, _mm256_cvtepi32_ps(ix));
+        let fy = _mm256_sub_ps(y, _mm256_cvtepi32_ps(iy));
+        let side_log2 = _mm256_sub_epi32(size_log2, level);
+        let mask = _mm256_sub_epi32(
+            _mm256_sllv_epi32(_mm256_set1_epi32(1), side_log2),
+            _mm256_set1_epi32(1),
+        );
+        let start = _mm256_i32gather_epi32::<4>(
+            self.level_starts.as_ptr(),
+            _mm256_add_epi32(_mm256_slli_epi32::<4>(texture), level),
+        );
+        let quad = _mm256_add_epi32(
+            start,
+            _mm256_add_epi32(
+                _mm256_sllv_epi32(_mm256_and_si256(iy, mask), side_log2),
+                _mm256_and_si256(ix, mask),
+            ),
+        );
+        let first = _mm256_slli_epi32::<2>(quad);
+        let base = self.quads.as_ptr().cast::<f32>();
+        let corner =
+            |k: i32| _mm256_i32gather_ps::<4>(base, _mm256_add_epi32(first, _mm256_set1_epi32(k)));
+        let one = _mm256_set1_ps(1.0);
+        let (gx, gy) = (_mm256_sub_ps(one, fx), _mm256_sub_ps(one, fy));
+        let top = _mm256_add_ps(_mm256_mul_ps(corner(0), gx), _mm256_mul_ps(corner(1), fx));
+        let bottom = _mm256_add_ps(_mm256_mul_ps(corner(2), gx), _mm256_mul_ps(corner(3), fx));
+        _mm256_add_ps(_mm256_mul_ps(top, gy), _mm256_mul_ps(bottom, fy))
+    }
+}
