@@ -1,20 +1,33 @@
 #!/usr/bin/env bash
-# Interleaved Rust-bench runs of two exports of the same weights, so that both see the same
-# load on a shared machine: for each repetition, each (threads, K) setting runs the old export
-# and then the new one. Writes <dir>/rust-bench-<label>-K<k>-<t>threads-rep<r>.json.
-#   bash models/reports/latency/run-interleaved.sh OLD.onnx NEW.onnx OUT_DIR [REPETITIONS]
+# Interleaved Rust-bench runs of several exports, so that all see the same load on a shared
+# machine: for each repetition and each (threads, K) setting, every export runs in turn.
+# Writes OUT_DIR/rust-bench-<label>-K<k>-<t>threads-rep<r>.json (summarise.py tabulates them).
+#   bash models/reports/latency/run-interleaved.sh OUT_DIR REPETITIONS LABEL=MODEL.onnx [LABEL=MODEL.onnx ...]
+# FIRST_REPETITION (default 1) numbers a later batch after an earlier one in the same OUT_DIR;
+# SETTINGS (default "2:8 2:4 2:1 1:8 1:1") lists threads:K pairs.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
-old=$1 new=$2 out=$3 repetitions=${4:-3}
+if [ $# -lt 3 ]; then
+  sed -n '2,7p' "$0" >&2
+  exit 2
+fi
+out=$1 repetitions=$2
+shift 2
+for spec in "$@"; do
+  if [[ "$spec" != *=* || ! -f "${spec#*=}" ]]; then
+    echo "run-interleaved: '$spec' is not LABEL=MODEL.onnx with an existing file" >&2
+    exit 2
+  fi
+done
 bench=$(cargo bench -p evgate-benches --bench inference --no-run --message-format=json 2>/dev/null |
   sed -n 's/.*"executable":"\([^"]*inference-[^"]*\)".*/\1/p' | tail -1)
 mkdir -p "$out"
-for rep in $(seq 1 "$repetitions"); do
-  for setting in 2:8 2:4 2:1 1:8 1:1; do
+first=${FIRST_REPETITION:-1}
+for rep in $(seq "$first" $((first + repetitions - 1))); do
+  for setting in ${SETTINGS:-2:8 2:4 2:1 1:8 1:1}; do
     threads=${setting%:*} horizons=${setting#*:}
-    for label in old new; do
-      model=$old
-      [ "$label" = new ] && model=$new
+    for spec in "$@"; do
+      label=${spec%%=*} model=${spec#*=}
       echo "rep $rep: $label K=$horizons threads=$threads" >&2
       EVGATE_BENCH_MODEL=$model EVGATE_BENCH_HORIZONS=$horizons EVGATE_BENCH_THREADS=$threads \
         EVGATE_BENCH_WINDOWS=100 \
