@@ -119,6 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--top", type=int, default=15, help="nodes listed per K")
     parser.add_argument("--output", type=Path, help="also write the result as JSON here")
     args = parser.parse_args(argv)
+    if not args.model.is_file():
+        parser.error(f"--model {args.model}: no such file")
     try:
         counts = parse_horizon_counts(args.horizons)
     except ProfileError as error:
