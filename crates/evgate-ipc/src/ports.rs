@@ -12,9 +12,10 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
-use iceoryx2::prelude::{AllocationStrategy, Node, ServiceName, ZeroCopySend};
+use iceoryx2::prelude::{AllocationStrategy, IceoryxSend, Node, ServiceName, ZeroCopySend};
 use iceoryx2::sample::Sample;
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
+use iceoryx2::service::builder::publish_subscribe::Builder;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use iceoryx2::service::port_factory::PortFactory as _;
 
@@ -99,6 +100,20 @@ fn port_error(service: &ServiceName, port: &'static str, reason: impl Debug) -> 
     }
 }
 
+fn send_error(service: &ServiceName, reason: impl Debug) -> PortError {
+    PortError::Send {
+        service: service.as_str().to_owned(),
+        reason: format!("{reason:?}"),
+    }
+}
+
+fn receive_error(service: &ServiceName, reason: impl Debug) -> PortError {
+    PortError::Receive {
+        service: service.as_str().to_owned(),
+        reason: format!("{reason:?}"),
+    }
+}
+
 fn open_wakeup_service(
     node: &Node<Service>,
     name: &ServiceName,
@@ -108,6 +123,30 @@ fn open_wakeup_service(
         .max_nodes(ServiceLimits::MAX_NODES)
         .open_or_create()
         .map_err(|error| service_error(name, "event", error))
+}
+
+fn open_notifier(node: &Node<Service>, name: &ServiceName) -> Result<Notifier<Service>, PortError> {
+    open_wakeup_service(node, name)?
+        .notifier_builder()
+        .create()
+        .map_err(|error| port_error(name, "notifier", error))
+}
+
+fn open_listener(node: &Node<Service>, name: &ServiceName) -> Result<Listener<Service>, PortError> {
+    open_wakeup_service(node, name)?
+        .listener_builder()
+        .create()
+        .map_err(|error| port_error(name, "listener", error))
+}
+
+fn wake_readers(notifier: &Notifier<Service>, service: &ServiceName) -> Result<(), PortError> {
+    notifier
+        .notify()
+        .map(|_| ())
+        .map_err(|error| PortError::Notify {
+            service: service.as_str().to_owned(),
+            reason: format!("{error:?}"),
+        })
 }
 
 fn check_buffer_size(qos: &Qos) -> Result<(), PortError> {
@@ -149,20 +188,17 @@ where
     notifier: Notifier<Service>,
 }
 
-/// Opens (or creates) the publish-subscribe service of `stream` with the crate-wide limits.
-fn open_slice_service<T, H>(
-    node: &Node<Service>,
-    name: &ServiceName,
-    stream: Stream,
-) -> Result<PortFactory<Service, [T], H>, PortError>
+/// Applies the crate-wide limits; a `latest` service keeps the newest sample for late
+/// subscribers and overwrites the oldest sample of a full subscriber.
+fn with_service_limits<P, H>(
+    builder: Builder<P, H, Service>,
+    latest: bool,
+) -> Builder<P, H, Service>
 where
-    T: Debug + ZeroCopySend + 'static,
-    H: Debug + ZeroCopySend + 'static,
+    P: Debug + IceoryxSend + ?Sized,
+    H: Debug + ZeroCopySend,
 {
-    let latest = wants_latest(stream);
-    node.service_builder(name)
-        .publish_subscribe::<[T]>()
-        .user_header::<H>()
+    builder
         .enable_safe_overflow(latest)
         .history_size(if latest {
             ServiceLimits::LATEST_HISTORY
@@ -174,6 +210,23 @@ where
         .max_publishers(ServiceLimits::MAX_PUBLISHERS)
         .max_subscribers(ServiceLimits::MAX_SUBSCRIBERS)
         .max_nodes(ServiceLimits::MAX_NODES)
+}
+
+/// Opens (or creates) the publish-subscribe service of `stream` with the crate-wide limits.
+fn open_slice_service<T, H>(
+    node: &Node<Service>,
+    name: &ServiceName,
+    stream: Stream,
+) -> Result<PortFactory<Service, [T], H>, PortError>
+where
+    T: Debug + ZeroCopySend + 'static,
+    H: Debug + ZeroCopySend + 'static,
+{
+    let builder = node
+        .service_builder(name)
+        .publish_subscribe::<[T]>()
+        .user_header::<H>();
+    with_service_limits(builder, wants_latest(stream))
         .open_or_create()
         .map_err(|error| service_error(name, "publish-subscribe", error))
 }
@@ -206,10 +259,7 @@ where
         let publisher = builder
             .create()
             .map_err(|error| port_error(&service_name, "publisher", error))?;
-        let notifier = open_wakeup_service(node, &service_name)?
-            .notifier_builder()
-            .create()
-            .map_err(|error| port_error(&service_name, "notifier", error))?;
+        let notifier = open_notifier(node, &service_name)?;
         Ok(Self {
             service_name,
             service,
@@ -304,14 +354,10 @@ where
         sample: iceoryx2::sample_mut::SampleMut<Service, [T], H>,
     ) -> Result<Delivery, PortError> {
         let subscribers = self.subscriber_count();
-        let recipients = sample.send().map_err(|error| PortError::Send {
-            service: self.service_name.as_str().to_owned(),
-            reason: format!("{error:?}"),
-        })?;
-        self.notifier.notify().map_err(|error| PortError::Notify {
-            service: self.service_name.as_str().to_owned(),
-            reason: format!("{error:?}"),
-        })?;
+        let recipients = sample
+            .send()
+            .map_err(|error| send_error(&self.service_name, error))?;
+        wake_readers(&self.notifier, &self.service_name)?;
         Ok(Delivery {
             recipients,
             undelivered: subscribers.saturating_sub(recipients),
@@ -355,10 +401,7 @@ where
         let subscriber = builder
             .create()
             .map_err(|error| port_error(&service_name, "subscriber", error))?;
-        let listener = open_wakeup_service(node, &service_name)?
-            .listener_builder()
-            .create()
-            .map_err(|error| port_error(&service_name, "listener", error))?;
+        let listener = open_listener(node, &service_name)?;
         Ok(Self {
             service_name,
             subscriber,
@@ -375,10 +418,7 @@ where
     pub fn receive(&self) -> Result<Option<Sample<Service, [T], H>>, PortError> {
         self.subscriber
             .receive()
-            .map_err(|error| PortError::Receive {
-                service: self.service_name.as_str().to_owned(),
-                reason: format!("{error:?}"),
-            })
+            .map_err(|error| receive_error(&self.service_name, error))
     }
 
     /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`.
@@ -401,15 +441,7 @@ fn open_value_service<T>(
 where
     T: Debug + ZeroCopySend + 'static,
 {
-    node.service_builder(name)
-        .publish_subscribe::<T>()
-        .enable_safe_overflow(true)
-        .history_size(ServiceLimits::LATEST_HISTORY)
-        .subscriber_max_buffer_size(ServiceLimits::SUBSCRIBER_MAX_BUFFER)
-        .subscriber_max_borrowed_samples(ServiceLimits::SUBSCRIBER_MAX_BORROWED)
-        .max_publishers(ServiceLimits::MAX_PUBLISHERS)
-        .max_subscribers(ServiceLimits::MAX_SUBSCRIBERS)
-        .max_nodes(ServiceLimits::MAX_NODES)
+    with_service_limits(node.service_builder(name).publish_subscribe::<T>(), true)
         .open_or_create()
         .map_err(|error| service_error(name, "publish-subscribe", error))
 }
@@ -433,10 +465,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestPublisher<T> {
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(|error| port_error(&service_name, "publisher", error))?;
-        let notifier = open_wakeup_service(node, &service_name)?
-            .notifier_builder()
-            .create()
-            .map_err(|error| port_error(&service_name, "notifier", error))?;
+        let notifier = open_notifier(node, &service_name)?;
         Ok(Self {
             service_name,
             publisher,
@@ -447,15 +476,8 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestPublisher<T> {
     pub fn publish(&self, value: T) -> Result<(), PortError> {
         self.publisher
             .send_copy(value)
-            .map_err(|error| PortError::Send {
-                service: self.service_name.as_str().to_owned(),
-                reason: format!("{error:?}"),
-            })?;
-        self.notifier.notify().map_err(|error| PortError::Notify {
-            service: self.service_name.as_str().to_owned(),
-            reason: format!("{error:?}"),
-        })?;
-        Ok(())
+            .map_err(|error| send_error(&self.service_name, error))?;
+        wake_readers(&self.notifier, &self.service_name)
     }
 }
 
@@ -478,10 +500,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
             .history_request(ServiceLimits::LATEST_HISTORY)
             .create()
             .map_err(|error| port_error(&service_name, "subscriber", error))?;
-        let listener = open_wakeup_service(node, &service_name)?
-            .listener_builder()
-            .create()
-            .map_err(|error| port_error(&service_name, "listener", error))?;
+        let listener = open_listener(node, &service_name)?;
         Ok(Self {
             service_name,
             subscriber,
@@ -496,10 +515,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
         while let Some(sample) = self
             .subscriber
             .receive()
-            .map_err(|error| PortError::Receive {
-                service: self.service_name.as_str().to_owned(),
-                reason: format!("{error:?}"),
-            })?
+            .map_err(|error| receive_error(&self.service_name, error))?
         {
             latest = Some(*sample.payload());
         }
