@@ -10,41 +10,34 @@
 //!
 //! `cargo bench -p evgate-benches --bench ipc_latency -- --out target/bench/ipc_latency.json`
 
+mod gate_fixture;
+
 use std::time::{Duration, Instant};
 
-use evgate_core::{words_for, BitMask, Event, ForecastView, GateMode, SensorSize};
+use evgate_core::{words_for, Event, ForecastView, GateMode};
 use evgate_e2e::{binary, unique_names, wait_until, workspace_root, Process};
 use evgate_ipc::{
     clock, create_node, BatchHeader, ForecastHeader, PipelineNames, Qos, SlicePublisher,
     SliceSubscriber, Stream,
 };
-use rand::{Rng, SeedableRng};
+use gate_fixture::{
+    flag_value, forecast, left_columns_mask, random_batch, write_report, BenchResult, HORIZONS_US,
+    REFERENCE_US, SENSOR,
+};
 use serde_json::json;
 
-const SENSOR: SensorSize = SensorSize::new(346, 260);
-const REFERENCE_US: i64 = 1_000_000;
-const HORIZONS_US: [i64; 2] = [25_000, 50_000];
 const TIMEOUT: Duration = Duration::from_secs(60);
 
-type BenchResult<T> = Result<T, Box<dyn std::error::Error>>;
-
 fn main() -> BenchResult<()> {
-    let args: Vec<String> = std::env::args().collect();
-    let value_of = |flag: &str| {
-        args.iter()
-            .position(|a| a == flag)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
-    if let Some(domain) = value_of("--echo") {
+    if let Some(domain) = flag_value("--echo") {
         return echo(&PipelineNames::new(&domain, "cam")?);
     }
     // cargo runs benches in the package directory; relative paths mean the workspace root.
     let out = workspace_root()
-        .join(value_of("--out").unwrap_or_else(|| "target/bench/ipc_latency.json".to_owned()));
+        .join(flag_value("--out").unwrap_or_else(|| "target/bench/ipc_latency.json".to_owned()));
     let mut results = Vec::new();
     for (size, iterations) in [(1_000, 3_000), (10_000, 2_000), (100_000, 500)] {
-        let events = batch(size);
+        let events = random_batch(size, size as u64);
         let gate = measure_peer(Peer::Gate, &events, iterations)?;
         let raw = measure_peer(Peer::RawEcho, &events, iterations)?;
         let kernel = kernel_times(&events, iterations.min(1_000));
@@ -67,13 +60,7 @@ fn main() -> BenchResult<()> {
         "machine": machine(),
         "results": results,
     });
-    if let Some(parent) = out.parent() {
-        std::fs::create_dir_all(parent)?;
-    }
-    std::fs::write(&out, serde_json::to_string_pretty(&report)?)?;
-    println!("{}", serde_json::to_string_pretty(&report)?);
-    eprintln!("written to {}", out.display());
-    Ok(())
+    write_report(&out, &report)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -82,46 +69,9 @@ enum Peer {
     RawEcho,
 }
 
-/// Random events on the sensor, all inside the forecast's horizons, in time order.
-fn batch(size: usize) -> Vec<Event> {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
-    let mut events: Vec<Event> = (0..size)
-        .map(|_| {
-            Event::new(
-                REFERENCE_US + rng.gen_range(0..HORIZONS_US[1]),
-                rng.gen_range(0..SENSOR.width),
-                rng.gen_range(0..SENSOR.height),
-                rng.gen_bool(0.5),
-            )
-        })
-        .collect();
-    events.sort_by_key(|e| e.t);
-    events
-}
-
 /// A forecast whose masks cover the whole sensor: every event is judged and kept.
-fn full_masks() -> Vec<u64> {
-    let mut mask = BitMask::new(SENSOR).expect("non-empty sensor");
-    for y in 0..SENSOR.height {
-        for x in 0..SENSOR.width {
-            mask.set(x, y, true).expect("pixel on the sensor");
-        }
-    }
-    mask.as_words().repeat(1 + HORIZONS_US.len())
-}
-
-fn forecast_header() -> ForecastHeader {
-    let mut header = ForecastHeader {
-        reference_time_us: REFERENCE_US,
-        window_start_us: REFERENCE_US - 50_000,
-        horizon_count: HORIZONS_US.len() as u32,
-        words_per_mask: words_for(SENSOR) as u32,
-        width: SENSOR.width,
-        height: SENSOR.height,
-        ..Default::default()
-    };
-    header.horizons_us[..HORIZONS_US.len()].copy_from_slice(&HORIZONS_US);
-    header
+fn full_sensor_forecast() -> (ForecastHeader, Vec<u64>) {
+    forecast(&left_columns_mask(SENSOR.width))
 }
 
 /// Round trips through `peer`, in microseconds.
@@ -148,7 +98,8 @@ fn measure_peer(peer: Peer, events: &[Event], iterations: usize) -> BenchResult<
         wait_until("the gate subscribing to forecasts", TIMEOUT, || {
             forecasts.subscriber_count() == 1
         })?;
-        forecasts.publish(forecast_header(), &full_masks())?;
+        let (header, masks) = full_sensor_forecast();
+        forecasts.publish(header, &masks)?;
     }
     let warmup = iterations / 10 + 10;
     let mut latencies = Vec::with_capacity(iterations);
@@ -244,7 +195,7 @@ fn echo(names: &PipelineNames) -> BenchResult<()> {
 
 /// The gate's kernel on the same batch, microseconds per call.
 fn kernel_times(events: &[Event], iterations: usize) -> Vec<f64> {
-    let words = full_masks();
+    let (_, words) = full_sensor_forecast();
     let per_mask = words_for(SENSOR);
     let view = ForecastView::new(REFERENCE_US, &HORIZONS_US, SENSOR, &words[per_mask..])
         .expect("valid forecast");

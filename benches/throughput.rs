@@ -12,37 +12,29 @@
 //!
 //! `cargo bench -p evgate-benches --bench throughput -- --out target/bench/throughput.json`
 
+mod gate_fixture;
+
 use std::time::{Duration, Instant};
 
-use evgate_core::{words_for, BitMask, Event, SensorSize};
+use evgate_core::Event;
 use evgate_e2e::{binary, unique_names, wait_until, workspace_root, Process};
 use evgate_ipc::{
     clock, create_node, BatchFlags, BatchHeader, ForecastHeader, LatestSubscriber, PipelineStats,
     Qos, SlicePublisher, Stream,
 };
-use rand::{Rng, SeedableRng};
+use gate_fixture::{
+    flag_value, forecast, left_columns_mask, random_batch, write_report, BenchResult, SENSOR,
+};
 use serde_json::json;
 
-const SENSOR: SensorSize = SensorSize::new(346, 260);
-const REFERENCE_US: i64 = 1_000_000;
-const HORIZONS_US: [i64; 2] = [25_000, 50_000];
 const TIMEOUT: Duration = Duration::from_secs(120);
 
-type BenchResult<T> = Result<T, Box<dyn std::error::Error>>;
-
 fn main() -> BenchResult<()> {
-    let args: Vec<String> = std::env::args().collect();
-    let value_of = |flag: &str| {
-        args.iter()
-            .position(|a| a == flag)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
     // cargo runs benches in the package directory; relative paths mean the workspace root.
     let out = workspace_root()
-        .join(value_of("--out").unwrap_or_else(|| "target/bench/throughput.json".to_owned()));
-    let total_events: u64 = value_of("--events").map_or(Ok(200_000_000), |v| v.parse())?;
-    let batch_events: usize = value_of("--batch-events").map_or(Ok(100_000), |v| v.parse())?;
+        .join(flag_value("--out").unwrap_or_else(|| "target/bench/throughput.json".to_owned()));
+    let total_events: u64 = flag_value("--events").map_or(Ok(200_000_000), |v| v.parse())?;
+    let batch_events: usize = flag_value("--batch-events").map_or(Ok(100_000), |v| v.parse())?;
 
     let throughput = sustained_throughput(total_events, batch_events)?;
     eprintln!("{throughput}");
@@ -53,48 +45,15 @@ fn main() -> BenchResult<()> {
         "throughput": throughput,
         "resident-memory": memory,
     });
-    if let Some(parent) = out.parent() {
-        std::fs::create_dir_all(parent)?;
-    }
-    std::fs::write(&out, serde_json::to_string_pretty(&report)?)?;
-    println!("{}", serde_json::to_string_pretty(&report)?);
-    eprintln!("written to {}", out.display());
-    Ok(())
+    write_report(&out, &report)
 }
 
 fn half_sensor_forecast() -> (ForecastHeader, Vec<u64>) {
-    let mut mask = BitMask::new(SENSOR).expect("non-empty sensor");
-    for y in 0..SENSOR.height {
-        for x in 0..SENSOR.width / 2 {
-            mask.set(x, y, true).expect("pixel on the sensor");
-        }
-    }
-    let mut header = ForecastHeader {
-        reference_time_us: REFERENCE_US,
-        window_start_us: REFERENCE_US - 50_000,
-        horizon_count: HORIZONS_US.len() as u32,
-        words_per_mask: words_for(SENSOR) as u32,
-        width: SENSOR.width,
-        height: SENSOR.height,
-        ..Default::default()
-    };
-    header.horizons_us[..HORIZONS_US.len()].copy_from_slice(&HORIZONS_US);
-    (header, mask.as_words().repeat(1 + HORIZONS_US.len()))
+    forecast(&left_columns_mask(SENSOR.width / 2))
 }
 
 fn sustained_throughput(total_events: u64, batch_events: usize) -> BenchResult<serde_json::Value> {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let mut events: Vec<Event> = (0..batch_events)
-        .map(|_| {
-            Event::new(
-                REFERENCE_US + rng.gen_range(0..HORIZONS_US[1]),
-                rng.gen_range(0..SENSOR.width),
-                rng.gen_range(0..SENSOR.height),
-                rng.gen_bool(0.5),
-            )
-        })
-        .collect();
-    events.sort_by_key(|e| e.t);
+    let events = random_batch(batch_events, 7);
 
     let names = unique_names("throughput");
     let node = create_node("throughput-bench")?;

@@ -1,0 +1,78 @@
+//! What the shared-memory benches (ipc_latency, throughput) feed the gate: random event
+//! batches on one sensor and forecasts over it, and the command-line and report handling they
+//! share.
+
+use std::path::Path;
+
+use evgate_core::{words_for, BitMask, Event, SensorSize};
+use evgate_ipc::ForecastHeader;
+use rand::{Rng, SeedableRng};
+
+pub const SENSOR: SensorSize = SensorSize::new(346, 260);
+pub const REFERENCE_US: i64 = 1_000_000;
+pub const HORIZONS_US: [i64; 2] = [25_000, 50_000];
+
+pub type BenchResult<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// `size` random events on the sensor, all inside the forecast's horizons, in time order.
+pub fn random_batch(size: usize, seed: u64) -> Vec<Event> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut events: Vec<Event> = (0..size)
+        .map(|_| {
+            Event::new(
+                REFERENCE_US + rng.gen_range(0..HORIZONS_US[1]),
+                rng.gen_range(0..SENSOR.width),
+                rng.gen_range(0..SENSOR.height),
+                rng.gen_bool(0.5),
+            )
+        })
+        .collect();
+    events.sort_by_key(|e| e.t);
+    events
+}
+
+/// A mask of the pixels in the sensor's leftmost `columns` columns.
+pub fn left_columns_mask(columns: u16) -> BitMask {
+    let mut mask = BitMask::new(SENSOR).expect("non-empty sensor");
+    for y in 0..SENSOR.height {
+        for x in 0..columns {
+            mask.set(x, y, true).expect("pixel on the sensor");
+        }
+    }
+    mask
+}
+
+/// A forecast at the reference time whose masks (now and at every horizon) are all `mask`.
+pub fn forecast(mask: &BitMask) -> (ForecastHeader, Vec<u64>) {
+    let mut header = ForecastHeader {
+        reference_time_us: REFERENCE_US,
+        window_start_us: REFERENCE_US - 50_000,
+        horizon_count: HORIZONS_US.len() as u32,
+        words_per_mask: words_for(SENSOR) as u32,
+        width: SENSOR.width,
+        height: SENSOR.height,
+        ..Default::default()
+    };
+    header.horizons_us[..HORIZONS_US.len()].copy_from_slice(&HORIZONS_US);
+    (header, mask.as_words().repeat(1 + HORIZONS_US.len()))
+}
+
+/// The argument after `flag` on this process's command line.
+pub fn flag_value(flag: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == flag)
+        .and_then(|i| args.get(i + 1))
+        .cloned()
+}
+
+/// Writes `report` to `out` (creating its folder), prints it, and says where it went.
+pub fn write_report(out: &Path, report: &serde_json::Value) -> BenchResult<()> {
+    if let Some(parent) = out.parent() {
+        std::fs::create_dir_all(parent)?;
+    }
+    std::fs::write(out, serde_json::to_string_pretty(report)?)?;
+    println!("{}", serde_json::to_string_pretty(report)?);
+    eprintln!("written to {}", out.display());
+    Ok(())
+}
