@@ -6,7 +6,7 @@ use std::ops::Range;
 
 use crate::camera::project_world;
 use crate::linalg::{Mat3, RigidTransform, Vec3};
-use crate::scene::{Scene, Shape};
+use crate::scene::{Panel, Scene, Shape};
 
 /// Log intensity of a ray that hits nothing (darker than any lit texel).
 const LOG_DARK: f32 = -6.0;
@@ -51,7 +51,42 @@ pub struct Snapshot<'a> {
     objects: Vec<PlacedObject>,
     panel_bounds: Vec<ScreenBounds>,
     panel_planes: Vec<PlanePlacement>,
+    panel_lanes: PanelLanes,
     all_objects: Vec<usize>,
+}
+
+/// The panels' shading constants, one array per scalar, for gathering eight pixels' panels.
+#[derive(Default)]
+struct PanelLanes {
+    origin: [Vec<f32>; 3],
+    axis_u: [Vec<f32>; 3],
+    axis_v: [Vec<f32>; 3],
+    normal: [Vec<f32>; 3],
+    texels_per_m: Vec<f32>,
+    log_illumination: Vec<f32>,
+    texture: Vec<i32>,
+}
+
+impl PanelLanes {
+    fn new(panels: &[Panel], planes: &[PlanePlacement]) -> PanelLanes {
+        let mut lanes = PanelLanes::default();
+        for (panel, plane) in panels.iter().zip(planes) {
+            for (axis, vector) in [
+                (&mut lanes.origin, panel.origin),
+                (&mut lanes.axis_u, panel.axis_u),
+                (&mut lanes.axis_v, panel.axis_v),
+                (&mut lanes.normal, plane.normal),
+            ] {
+                axis[0].push(vector.x);
+                axis[1].push(vector.y);
+                axis[2].push(vector.z);
+            }
+            lanes.texels_per_m.push(plane.texels_per_m);
+            lanes.log_illumination.push(plane.log_illumination);
+            lanes.texture.push(panel.texture as i32);
+        }
+        lanes
+    }
 }
 
 /// A panel's plane relative to the camera centre: a ray `t·d` meets it at `t = offset / (n·d)`.
@@ -244,7 +279,7 @@ impl<'a> Snapshot<'a> {
                 }
             })
             .collect();
-        let panel_planes = scene
+        let panel_planes: Vec<PlanePlacement> = scene
             .panels
             .iter()
             .map(|panel| {
@@ -260,6 +295,7 @@ impl<'a> Snapshot<'a> {
         Snapshot {
             scene,
             camera,
+            panel_lanes: PanelLanes::new(&scene.panels, &panel_planes),
             panel_planes,
             all_objects: (0..object_count).collect(),
             objects,
@@ -392,27 +428,22 @@ impl<'a> Snapshot<'a> {
         let width = log_intensity.len();
         let blocks_end = if GATHER { width / 8 * 8 } else { 0 };
         for start in (0..blocks_end).step_by(8) {
-            let mut texture = [0i32; 8];
-            let (mut u, mut v) = ([0.0f32; 8], [0.0f32; 8]);
-            let mut footprint = [1.0f32; 8];
-            let mut log_illumination = [LOG_DARK; 8];
-            let mut dark = [true; 8];
-            for k in 0..8 {
-                if let Some(texel) = self.panel_texel(scratch, start + k) {
-                    texture[k] = texel.texture as i32;
-                    (u[k], v[k], footprint[k]) = (texel.u, texel.v, texel.footprint);
-                    log_illumination[k] = texel.log_illumination;
-                    dark[k] = false;
-                }
-            }
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `GATHER` is set only by `render_rows_avx2`, which runs where the CPU
-            // has AVX2; the lanes' textures are the scene's.
-            let sampled = unsafe { self.scene.atlas.sample8(&texture, &u, &v, &footprint) };
+            // has AVX2; the lanes' panels and textures are the scene's.
+            let (sampled, log_illumination, dark) = unsafe {
+                let texels = self.panel_texels8(scratch, start);
+                let sampled = self.scene.atlas.sample8(
+                    &texels.texture,
+                    &texels.u,
+                    &texels.v,
+                    &texels.footprint,
+                );
+                (sampled, texels.log_illumination, texels.dark)
+            };
             #[cfg(not(target_arch = "x86_64"))]
-            let sampled: [f32; 8] = std::array::from_fn(|k| {
-                self.scene.textures[texture[k] as usize].sample(u[k], v[k], footprint[k])
-            });
+            let (sampled, log_illumination, dark): ([f32; 8], [f32; 8], [bool; 8]) =
+                unreachable!("GATHER is set only by the x86-64 AVX2 build");
             for k in 0..8 {
                 log_intensity[start + k] = if dark[k] {
                     LOG_DARK
@@ -430,6 +461,101 @@ impl<'a> Snapshot<'a> {
                 }
             };
         }
+    }
+
+    /// [`Snapshot::panel_texel`] for columns `start..start + 8` at once.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn panel_texels8(&self, scratch: &RowScratch, start: usize) -> PanelTexels8 {
+        use std::arch::x86_64::*;
+        let lanes = &self.panel_lanes;
+        let block = start..start + 8;
+        let id = _mm256_loadu_si256(scratch.nearest_panel[block.clone()].as_ptr().cast());
+        let dark = _mm256_cmpeq_epi32(id, _mm256_set1_epi32(NO_PANEL as i32));
+        let panel = _mm256_andnot_si256(dark, id);
+        let count = lanes.texture.len() as i32;
+        let mut panels = [0i32; 8];
+        _mm256_storeu_si256(panels.as_mut_ptr().cast(), panel);
+        assert!(panels.iter().all(|&p| (0..count).contains(&p)));
+        // SAFETY (gathers): every lane's panel index is below the panel count (asserted).
+        let gather = |values: &Vec<f32>| _mm256_i32gather_ps::<4>(values.as_ptr(), panel);
+        let [dx, dy, dz] = [
+            &scratch.directions.x,
+            &scratch.directions.y,
+            &scratch.directions.z,
+        ]
+        .map(|component| _mm256_loadu_ps(component[block.clone()].as_ptr()));
+        let t = _mm256_loadu_ps(scratch.nearest_depth[block].as_ptr());
+        let camera = self.camera.translation;
+        // relative = camera + direction · t − panel origin, per component.
+        let relative = |camera: f32, direction: __m256, origin: &Vec<f32>| {
+            _mm256_sub_ps(
+                _mm256_add_ps(_mm256_set1_ps(camera), _mm256_mul_ps(direction, t)),
+                gather(origin),
+            )
+        };
+        let (rx, ry, rz) = (
+            relative(camera.x, dx, &lanes.origin[0]),
+            relative(camera.y, dy, &lanes.origin[1]),
+            relative(camera.z, dz, &lanes.origin[2]),
+        );
+        let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
+            _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
+                _mm256_mul_ps(az, bz),
+            )
+        };
+        let axis = |axis: &[Vec<f32>; 3]| (gather(&axis[0]), gather(&axis[1]), gather(&axis[2]));
+        let (ux, uy, uz) = axis(&lanes.axis_u);
+        let (vx, vy, vz) = axis(&lanes.axis_v);
+        let (nx, ny, nz) = axis(&lanes.normal);
+        let texels_per_m = gather(&lanes.texels_per_m);
+        let cosine = _mm256_div_ps(
+            _mm256_andnot_ps(_mm256_set1_ps(-0.0), dot(nx, ny, nz, dx, dy, dz)),
+            _mm256_sqrt_ps(dot(dx, dy, dz, dx, dy, dz)),
+        );
+        let cos_incidence = _mm256_max_ps(cosine, _mm256_set1_ps(0.05));
+        let metres_per_pixel = _mm256_div_ps(
+            t,
+            _mm256_mul_ps(_mm256_set1_ps(self.scene.intrinsics.fx), cos_incidence),
+        );
+        let dark_ps = _mm256_castsi256_ps(dark);
+        // Dark lanes read texel (0, 0) of the panel-0 texture at level 0; their value is
+        // replaced by the dark level.
+        let or_zero = |value: __m256| _mm256_andnot_ps(dark_ps, value);
+        let mut texels = PanelTexels8::default();
+        _mm256_storeu_ps(
+            texels.u.as_mut_ptr(),
+            or_zero(_mm256_mul_ps(dot(rx, ry, rz, ux, uy, uz), texels_per_m)),
+        );
+        _mm256_storeu_ps(
+            texels.v.as_mut_ptr(),
+            or_zero(_mm256_mul_ps(dot(rx, ry, rz, vx, vy, vz), texels_per_m)),
+        );
+        _mm256_storeu_ps(
+            texels.footprint.as_mut_ptr(),
+            _mm256_blendv_ps(
+                _mm256_mul_ps(metres_per_pixel, texels_per_m),
+                _mm256_set1_ps(1.0),
+                dark_ps,
+            ),
+        );
+        _mm256_storeu_ps(
+            texels.log_illumination.as_mut_ptr(),
+            gather(&lanes.log_illumination),
+        );
+        _mm256_storeu_si256(
+            texels.texture.as_mut_ptr().cast(),
+            _mm256_i32gather_epi32::<4>(lanes.texture.as_ptr(), panel),
+        );
+        let mut dark_lanes = [0i32; 8];
+        _mm256_storeu_si256(dark_lanes.as_mut_ptr().cast(), dark);
+        texels.dark = dark_lanes.map(|lane| lane != 0);
+        texels
     }
 
     /// Where the ray of column `c` (searched by [`Snapshot::nearest_panels`]) meets its
@@ -818,6 +944,18 @@ struct PanelTexel {
     v: f32,
     footprint: f32,
     log_illumination: f32,
+}
+
+/// [`PanelTexel`] for eight columns, and which of them meet no panel.
+#[cfg(target_arch = "x86_64")]
+#[derive(Default)]
+struct PanelTexels8 {
+    texture: [i32; 8],
+    u: [f32; 8],
+    v: [f32; 8],
+    footprint: [f32; 8],
+    log_illumination: [f32; 8],
+    dark: [bool; 8],
 }
 
 /// A moving object met by a ray: its id, the object-local point, depth and surface.
