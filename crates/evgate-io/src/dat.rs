@@ -57,30 +57,28 @@ impl RecordFormat for DatRecords {
     const RECORD_BYTES: usize = RECORD_BYTES;
     const RECORD_NAME: &'static str = "a DAT record";
 
-    fn decode_records(
+    fn decode_record(
         &mut self,
-        start: u64,
-        bytes: &[u8],
+        offset: u64,
+        record: &[u8],
         admission: &mut Admission,
         out: &mut Vec<Event>,
     ) -> Result<(), BadRecord> {
-        for (i, record) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
-            let raw_t = u32::from_le_bytes([record[0], record[1], record[2], record[3]]);
-            let data = u32::from_le_bytes([record[4], record[5], record[6], record[7]]);
-            if let Some(last) = self.last_raw_t {
-                if raw_t < last && last - raw_t > 1 << 31 {
-                    self.wraps = self.wraps.saturating_add(TIME_WRAP);
-                }
+        let raw_t = u32::from_le_bytes([record[0], record[1], record[2], record[3]]);
+        let data = u32::from_le_bytes([record[4], record[5], record[6], record[7]]);
+        if let Some(last) = self.last_raw_t {
+            if raw_t < last && last - raw_t > 1 << 31 {
+                self.wraps = self.wraps.saturating_add(TIME_WRAP);
             }
-            self.last_raw_t = Some(raw_t);
-            let event = Event::new(
-                self.wraps.saturating_add(raw_t as i64),
-                (data & 0x3fff) as u16,
-                ((data >> 14) & 0x3fff) as u16,
-                (data >> 28) != 0,
-            );
-            admission.admit(out, event, start + (i * RECORD_BYTES) as u64);
         }
+        self.last_raw_t = Some(raw_t);
+        let event = Event::new(
+            self.wraps.saturating_add(raw_t as i64),
+            (data & 0x3fff) as u16,
+            ((data >> 14) & 0x3fff) as u16,
+            (data >> 28) != 0,
+        );
+        admission.admit(out, event, offset);
         Ok(())
     }
 }

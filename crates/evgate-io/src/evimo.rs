@@ -140,44 +140,41 @@ impl RecordFormat for EvimoRows {
     const RECORD_BYTES: usize = RECORD_BYTES;
     const RECORD_NAME: &'static str = "an EVIMO event row";
 
-    fn decode_records(
+    fn decode_record(
         &mut self,
-        start: u64,
-        bytes: &[u8],
+        offset: u64,
+        row: &[u8],
         admission: &mut Admission,
         out: &mut Vec<Event>,
     ) -> Result<(), BadRecord> {
-        for (i, row) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
-            let value =
-                |k: usize| f64::from_le_bytes(row[8 * k..8 * k + 8].try_into().expect("8 bytes"));
-            let (t, x, y, p) = (value(0), value(1), value(2), value(3));
-            let offset = start + (i * RECORD_BYTES) as u64;
-            let coordinate =
-                |v: f64| (v.fract() == 0.0 && (0.0..=65535.0).contains(&v)).then_some(v as u16);
-            let micros = t * 1e6;
-            let on = match p {
-                1.0 => Some(true),
-                0.0 | -1.0 => Some(false),
-                _ => None,
-            };
-            match (
-                micros.is_finite() && micros.abs() < 9e18,
-                coordinate(x),
-                coordinate(y),
-                on,
-            ) {
-                (true, Some(x), Some(y), Some(on)) => {
-                    admission.admit(out, Event::new(micros.round() as i64, x, y, on), offset)
-                }
-                _ => {
-                    let row = [t, x, y, p];
-                    return Err(BadRecord {
-                        offset,
-                        problem: format!(
-                            "row {row:?} is not [t seconds, x, y, p] with integral coordinates in 0..=65535 and p in 1, 0, -1"
-                        ),
-                    });
-                }
+        let value =
+            |k: usize| f64::from_le_bytes(row[8 * k..8 * k + 8].try_into().expect("8 bytes"));
+        let (t, x, y, p) = (value(0), value(1), value(2), value(3));
+        let coordinate =
+            |v: f64| (v.fract() == 0.0 && (0.0..=65535.0).contains(&v)).then_some(v as u16);
+        let micros = t * 1e6;
+        let on = match p {
+            1.0 => Some(true),
+            0.0 | -1.0 => Some(false),
+            _ => None,
+        };
+        match (
+            micros.is_finite() && micros.abs() < 9e18,
+            coordinate(x),
+            coordinate(y),
+            on,
+        ) {
+            (true, Some(x), Some(y), Some(on)) => {
+                admission.admit(out, Event::new(micros.round() as i64, x, y, on), offset)
+            }
+            _ => {
+                let row = [t, x, y, p];
+                return Err(BadRecord {
+                    offset,
+                    problem: format!(
+                        "row {row:?} is not [t seconds, x, y, p] with integral coordinates in 0..=65535 and p in 1, 0, -1"
+                    ),
+                });
             }
         }
         Ok(())

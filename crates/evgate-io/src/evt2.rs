@@ -42,36 +42,33 @@ impl RecordFormat for Evt2Words {
     const RECORD_BYTES: usize = 4;
     const RECORD_NAME: &'static str = "an EVT 2.0 word";
 
-    fn decode_records(
+    fn decode_record(
         &mut self,
-        start: u64,
-        bytes: &[u8],
+        offset: u64,
+        word: &[u8],
         admission: &mut Admission,
         out: &mut Vec<Event>,
     ) -> Result<(), BadRecord> {
-        for (i, word) in bytes.chunks_exact(4).enumerate() {
-            let word = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
-            let offset = start + 4 * i as u64;
-            match word >> 28 {
-                kind @ (0x0 | 0x1) => {
-                    // Saturating: adversarial input can repeat wraps past the i64 range.
-                    let t = self
-                        .wraps
-                        .saturating_add(self.time_high + ((word >> 22) & 0x3f) as i64);
-                    let x = ((word >> 11) & 0x7ff) as u16;
-                    let y = (word & 0x7ff) as u16;
-                    admission.admit(out, Event::new(t, x, y, kind == 1), offset);
-                }
-                0x8 => {
-                    let time_high = ((word & 0x0fff_ffff) as i64) << 6;
-                    if time_high < self.time_high {
-                        self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
-                    }
-                    self.time_high = time_high;
-                }
-                0xA | 0xE | 0xF => {}
-                _ => admission.report.skip_word(offset),
+        let word = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
+        match word >> 28 {
+            kind @ (0x0 | 0x1) => {
+                // Saturating: adversarial input can repeat wraps past the i64 range.
+                let t = self
+                    .wraps
+                    .saturating_add(self.time_high + ((word >> 22) & 0x3f) as i64);
+                let x = ((word >> 11) & 0x7ff) as u16;
+                let y = (word & 0x7ff) as u16;
+                admission.admit(out, Event::new(t, x, y, kind == 1), offset);
             }
+            0x8 => {
+                let time_high = ((word & 0x0fff_ffff) as i64) << 6;
+                if time_high < self.time_high {
+                    self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
+                }
+                self.time_high = time_high;
+            }
+            0xA | 0xE | 0xF => {}
+            _ => admission.report.skip_word(offset),
         }
         Ok(())
     }

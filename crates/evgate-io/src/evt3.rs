@@ -118,66 +118,61 @@ impl RecordFormat for Evt3Words {
     const RECORD_BYTES: usize = 2;
     const RECORD_NAME: &'static str = "an EVT 3.0 word";
 
-    fn decode_records(
+    fn decode_record(
         &mut self,
-        start: u64,
-        bytes: &[u8],
+        offset: u64,
+        word: &[u8],
         admission: &mut Admission,
         out: &mut Vec<Event>,
     ) -> Result<(), BadRecord> {
-        for (i, word) in bytes.chunks_exact(2).enumerate() {
-            let word = u16::from_le_bytes([word[0], word[1]]);
-            let offset = start + 2 * i as u64;
-            // Saturating: adversarial input can repeat wraps past the i64 range.
-            let t = self
-                .wraps
-                .saturating_add((self.time_high << 12) + self.time_low);
-            match word >> 12 {
-                0x0 => self.y = word & 0x7ff,
-                0x2 => {
-                    let on = word & 0x800 != 0;
-                    admission.admit(out, Event::new(t, word & 0x7ff, self.y, on), offset);
-                }
-                0x3 => {
-                    self.base_x = word & 0x7ff;
-                    self.vector_on = word & 0x800 != 0;
-                }
-                kind @ (0x4 | 0x5) => {
-                    let (width, mask) = if kind == 0x4 {
-                        (12, word & 0xfff)
-                    } else {
-                        (8, word & 0xff)
-                    };
-                    let mut bits = mask;
-                    while bits != 0 {
-                        let bit = bits.trailing_zeros() as u16;
-                        bits &= bits - 1;
-                        // Columns past the 11-bit range wrap in the sensor's arithmetic;
-                        // saturating keeps them off the sensor so they are dropped and counted.
-                        let x = self.base_x.saturating_add(bit);
-                        admission.admit(out, Event::new(t, x, self.y, self.vector_on), offset);
-                    }
-                    self.base_x = self.base_x.saturating_add(width);
-                }
-                0x6 => {
-                    let time_low = (word & 0xfff) as i64;
-                    if self.time_low_rule == Evt3TimeLow::CarryOnStepBack
-                        && time_low < self.time_low
-                    {
-                        self.wraps = self.wraps.saturating_add(TIME_LOW_CARRY);
-                    }
-                    self.time_low = time_low;
-                }
-                0x8 => {
-                    let time_high = (word & 0xfff) as i64;
-                    if time_high < self.time_high {
-                        self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
-                    }
-                    self.time_high = time_high;
-                }
-                0x7 | 0xA | 0xE | 0xF => {}
-                _ => admission.report.skip_word(offset),
+        let word = u16::from_le_bytes([word[0], word[1]]);
+        // Saturating: adversarial input can repeat wraps past the i64 range.
+        let t = self
+            .wraps
+            .saturating_add((self.time_high << 12) + self.time_low);
+        match word >> 12 {
+            0x0 => self.y = word & 0x7ff,
+            0x2 => {
+                let on = word & 0x800 != 0;
+                admission.admit(out, Event::new(t, word & 0x7ff, self.y, on), offset);
             }
+            0x3 => {
+                self.base_x = word & 0x7ff;
+                self.vector_on = word & 0x800 != 0;
+            }
+            kind @ (0x4 | 0x5) => {
+                let (width, mask) = if kind == 0x4 {
+                    (12, word & 0xfff)
+                } else {
+                    (8, word & 0xff)
+                };
+                let mut bits = mask;
+                while bits != 0 {
+                    let bit = bits.trailing_zeros() as u16;
+                    bits &= bits - 1;
+                    // Columns past the 11-bit range wrap in the sensor's arithmetic;
+                    // saturating keeps them off the sensor so they are dropped and counted.
+                    let x = self.base_x.saturating_add(bit);
+                    admission.admit(out, Event::new(t, x, self.y, self.vector_on), offset);
+                }
+                self.base_x = self.base_x.saturating_add(width);
+            }
+            0x6 => {
+                let time_low = (word & 0xfff) as i64;
+                if self.time_low_rule == Evt3TimeLow::CarryOnStepBack && time_low < self.time_low {
+                    self.wraps = self.wraps.saturating_add(TIME_LOW_CARRY);
+                }
+                self.time_low = time_low;
+            }
+            0x8 => {
+                let time_high = (word & 0xfff) as i64;
+                if time_high < self.time_high {
+                    self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
+                }
+                self.time_high = time_high;
+            }
+            0x7 | 0xA | 0xE | 0xF => {}
+            _ => admission.report.skip_word(offset),
         }
         Ok(())
     }

@@ -105,34 +105,31 @@ impl RecordFormat for NativeRecords {
     const RECORD_BYTES: usize = RECORD_BYTES;
     const RECORD_NAME: &'static str = "an .evg record";
 
-    fn decode_records(
+    fn decode_record(
         &mut self,
-        start: u64,
-        bytes: &[u8],
+        offset: u64,
+        record: &[u8],
         admission: &mut Admission,
         out: &mut Vec<Event>,
     ) -> Result<(), BadRecord> {
-        for (i, record) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
-            let offset = start + (i * RECORD_BYTES) as u64;
-            let polarity = record[12];
-            let reserved = [record[13], record[14], record[15]];
-            if polarity > 1 || reserved != [0, 0, 0] {
-                return Err(BadRecord {
-                    offset: offset + 12,
-                    problem: format!(
-                        "polarity byte {polarity} and reserved bytes {reserved:?} must be 0/1 and zero"
-                    ),
-                });
-            }
-            let event = Event::new(
-                i64::from_le_bytes(record[..8].try_into().expect("8 time bytes")),
-                u16::from_le_bytes([record[8], record[9]]),
-                u16::from_le_bytes([record[10], record[11]]),
-                polarity == 1,
-            );
-            admission.admit(out, event, offset);
+        let polarity = record[12];
+        let reserved = [record[13], record[14], record[15]];
+        if polarity > 1 || reserved != [0, 0, 0] {
+            return Err(BadRecord {
+                offset: offset + 12,
+                problem: format!(
+                    "polarity byte {polarity} and reserved bytes {reserved:?} must be 0/1 and zero"
+                ),
+            });
         }
-        self.records_seen += (bytes.len() / RECORD_BYTES) as u64;
+        let event = Event::new(
+            i64::from_le_bytes(record[..8].try_into().expect("8 time bytes")),
+            u16::from_le_bytes([record[8], record[9]]),
+            u16::from_le_bytes([record[10], record[11]]),
+            polarity == 1,
+        );
+        admission.admit(out, event, offset);
+        self.records_seen += 1;
         Ok(())
     }
 

@@ -21,12 +21,12 @@ pub trait RecordFormat: Send {
     /// Names a record in truncation errors ("an EVT 2.0 word").
     const RECORD_NAME: &'static str;
 
-    /// Decodes whole records (the first at file offset `start`) into `out` through
+    /// Decodes one record (`RECORD_BYTES` long, at file offset `offset`) into `out` through
     /// `admission`.
-    fn decode_records(
+    fn decode_record(
         &mut self,
-        start: u64,
-        records: &[u8],
+        offset: u64,
+        record: &[u8],
         admission: &mut Admission,
         out: &mut Vec<Event>,
     ) -> Result<(), BadRecord>;
@@ -51,7 +51,13 @@ impl<R: RecordFormat> ChunkFormat for R {
             let decoded = if end {
                 self.at_end(start)
             } else {
-                self.decode_records(start, records, &mut input.admission, out)
+                records
+                    .chunks_exact(R::RECORD_BYTES)
+                    .enumerate()
+                    .try_for_each(|(i, record)| {
+                        let offset = start + (i * R::RECORD_BYTES) as u64;
+                        self.decode_record(offset, record, &mut input.admission, out)
+                    })
             };
             decoded.map_err(|bad| input.malformed(bad.offset, bad.problem))?;
             if end {
