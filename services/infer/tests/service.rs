@@ -58,6 +58,17 @@ fn wait_for_exit(mut child: Child, limit: Duration, mut meanwhile: impl FnMut())
     child.wait_with_output().unwrap()
 }
 
+/// The JSON report a successful exit prints on stdout.
+fn successful_exit_report(output: &Output) -> serde_json::Value {
+    assert!(
+        output.status.success(),
+        "exit {}; stderr:\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
 fn wait_for_subscriber(publisher: &SlicePublisher<Event, BatchHeader>, child: &mut Child) {
     let started = Instant::now();
     while publisher.subscriber_count() == 0 {
@@ -118,6 +129,11 @@ fn windows_become_forecasts_and_the_service_exits_at_the_end_of_the_stream() {
 
     let batches = 30;
     let mut received = Vec::new();
+    let mut receive_forecasts = || {
+        while let Some(sample) = forecasts.receive().unwrap() {
+            received.push((*sample.user_header(), sample.payload().to_vec()));
+        }
+    };
     let mut first_event_index = 0;
     for sequence in 0..batches {
         let t_begin = sequence as i64 * BATCH_US;
@@ -142,26 +158,15 @@ fn windows_become_forecasts_and_the_service_exits_at_the_end_of_the_stream() {
         publisher.publish(header, &events).unwrap();
         // Real time, so that the model keeps up on a loaded machine most of the time.
         std::thread::sleep(Duration::from_millis(10));
-        while let Some(sample) = forecasts.receive().unwrap() {
-            received.push((*sample.user_header(), sample.payload().to_vec()));
-        }
+        receive_forecasts();
     }
     // The forecasts vanish with their publisher, so keep reading until the service exits.
-    let output = wait_for_exit(child, Duration::from_secs(60), || {
-        while let Some(sample) = forecasts.receive().unwrap() {
-            received.push((*sample.user_header(), sample.payload().to_vec()));
-        }
-    });
+    let output = wait_for_exit(child, Duration::from_secs(60), receive_forecasts);
+    let report = successful_exit_report(&output);
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(
-        output.status.success(),
-        "exit {}; stderr:\n{stderr}",
-        output.status
-    );
 
     // Windows end at 50, 100, … 250 ms: the 300 ms one never closes because the stream ends
     // at 300 ms exclusive.
-    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     assert_eq!(report["windows-closed"], 5, "{report}");
     let published = report["forecasts-published"].as_u64().unwrap();
     let skipped = report["windows-skipped-busy"].as_u64().unwrap();
@@ -209,13 +214,7 @@ fn sigint_stops_the_service_cleanly_with_its_stats() {
         .unwrap();
     assert!(status.success());
     let output = wait_for_exit(child, Duration::from_secs(30), || {});
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(
-        output.status.success(),
-        "exit {}; stderr:\n{stderr}",
-        output.status
-    );
-    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let report = successful_exit_report(&output);
     assert_eq!(report["windows-closed"], 0, "{report}");
     assert_eq!(report["model"].as_str(), model_path().to_str(), "{report}");
     assert!(report["inference"]["count"] == 0, "{report}");
