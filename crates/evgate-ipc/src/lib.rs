@@ -16,6 +16,7 @@
 pub mod batch;
 pub mod clock;
 pub mod forecast;
+pub mod logging;
 pub mod names;
 pub mod node;
 pub mod ports;
@@ -25,6 +26,7 @@ pub mod stats;
 
 pub use batch::{BatchFlags, BatchHeader};
 pub use forecast::{ForecastError, ForecastHeader, MAX_HORIZONS};
+pub use logging::init_service_logging;
 pub use names::{NameError, PipelineNames, Stream};
 pub use node::{create_node, NodeError};
 pub use ports::{

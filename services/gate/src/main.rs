@@ -22,7 +22,6 @@ use iceoryx2::prelude::{CallbackProgression, WaitSetAttachmentId, WaitSetBuilder
 use iceoryx2::waitset::WaitSetRunResult;
 use serde::Serialize;
 use tracing::{info, warn};
-use tracing_subscriber::EnvFilter;
 
 use accounting::{Accounting, Admission};
 use forecast_store::StoredForecast;
@@ -105,13 +104,7 @@ struct GateSummary {
 }
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| EnvFilter::new("info,iceoryx2_bb_loggers=error")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    evgate_ipc::init_service_logging("info,iceoryx2_bb_loggers=error");
     let args = Args::parse();
     if args.stats_interval_ms == 0 {
         anyhow::bail!("--stats-interval-ms = 0 must be at least 1");

@@ -10,15 +10,9 @@ mod windowing;
 mod worker;
 
 use clap::Parser;
-use tracing_subscriber::EnvFilter;
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    evgate_ipc::init_service_logging("info");
     let args = args::InferArgs::parse();
     let report = service::run(&args)?;
     tracing::info!("{}", report.line());

@@ -21,7 +21,6 @@ use evgate_sim::Preset;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 use tracing::{info, warn};
-use tracing_subscriber::EnvFilter;
 
 use batcher::{BatchSize, Batcher};
 use pacing::Pacer;
@@ -115,13 +114,7 @@ struct IngestSummary {
 }
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| EnvFilter::new("info,iceoryx2_bb_loggers=error")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    evgate_ipc::init_service_logging("info,iceoryx2_bb_loggers=error");
     let args = Args::parse();
     validate(&args)?;
     let summary = run(&args)?;
