@@ -121,7 +121,7 @@ impl Recording {
             masks: sequence.masks,
             tolerance_us: SIMULATOR_FRAME_TOLERANCE_US,
         };
-        let recording = Self {
+        Self {
             path: path.to_path_buf(),
             name: recording_name(path),
             group,
@@ -130,9 +130,8 @@ impl Recording {
             event_labels: Some(sequence.labels),
             frames: Some(frames),
             reference_times_us: sequence.ref_ts,
-        };
-        recording.validate()?;
-        Ok(recording)
+        }
+        .validated()
     }
 
     /// A recording with object masks at camera frame times (EVIMO): the frame times are the
@@ -144,7 +143,7 @@ impl Recording {
         events: Vec<Event>,
         frames: MaskFrames,
     ) -> Result<Self, RecordingError> {
-        let recording = Self {
+        Self {
             path: path.to_path_buf(),
             name: recording_name(path),
             group,
@@ -153,9 +152,8 @@ impl Recording {
             event_labels: None,
             reference_times_us: frames.times_us.clone(),
             frames: Some(frames),
-        };
-        recording.validate()?;
-        Ok(recording)
+        }
+        .validated()
     }
 
     /// A recording without ground truth (DSEC, any event file): reference times every
@@ -176,7 +174,7 @@ impl Recording {
             .map(|k| first.t + k * period_us.max(1))
             .take_while(|&t| t <= last.t)
             .collect();
-        let recording = Self {
+        Self {
             path: path.to_path_buf(),
             name: recording_name(path),
             group,
@@ -185,12 +183,12 @@ impl Recording {
             event_labels: None,
             frames: None,
             reference_times_us,
-        };
-        recording.validate()?;
-        Ok(recording)
+        }
+        .validated()
     }
 
-    fn validate(&self) -> Result<(), RecordingError> {
+    /// Every constructor ends here: the sensor, the time order and the mask sizes checked.
+    fn validated(self) -> Result<Self, RecordingError> {
         if self.sensor_size.pixels() == 0 {
             return Err(RecordingError::EmptySensor {
                 path: self.path.clone(),
@@ -227,7 +225,7 @@ impl Recording {
                 });
             }
         }
-        Ok(())
+        Ok(self)
     }
 
     pub fn ground_truth(&self) -> GroundTruth {
