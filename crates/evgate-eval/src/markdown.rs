@@ -6,7 +6,7 @@ use crate::method::MethodKind;
 use crate::model_tables::model_tables;
 use crate::recording::GroundTruth;
 use crate::report::Report;
-use crate::summary::MethodSummary;
+use crate::summary::{HorizonSummary, MethodSummary};
 
 pub(crate) fn percent(value: Option<f64>) -> String {
     value.map_or_else(|| "–".to_owned(), |v| format!("{:.1}", v * 100.0))
@@ -64,6 +64,18 @@ pub(crate) fn truth_cell(has_masks: bool, text: String) -> String {
     } else {
         NO_MASKS.to_owned()
     }
+}
+
+/// "mIoU / R@0.5" of one method at one horizon.
+fn iou_and_recall_cell(has_masks: bool, at: Option<&HorizonSummary>) -> String {
+    truth_cell(
+        has_masks,
+        format!(
+            "{} / {}",
+            percent(at.and_then(|h| h.mean_iou)),
+            percent(at.and_then(|h| h.instance_recall))
+        ),
+    )
 }
 
 pub(crate) fn method_summaries<'a>(
@@ -189,14 +201,7 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         let mut cells = vec![column.clone()];
         for method in &forecasters {
             let at = method_summaries(report, method)[index].and_then(|s| s.at(headline));
-            cells.push(truth_cell(
-                with_masks[index],
-                format!(
-                    "{} / {}",
-                    percent(at.and_then(|h| h.mean_iou)),
-                    percent(at.and_then(|h| h.instance_recall))
-                ),
-            ));
+            cells.push(iou_and_recall_cell(with_masks[index], at));
         }
         out += &row(&cells);
     }
@@ -432,14 +437,7 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         ];
         for method in &forecasters {
             let at = sequence.methods.get(*method).and_then(|s| s.at(headline));
-            cells.push(truth_cell(
-                sequence.ground_truth.has_masks(),
-                format!(
-                    "{} / {}",
-                    percent(at.and_then(|h| h.mean_iou)),
-                    percent(at.and_then(|h| h.instance_recall))
-                ),
-            ));
+            cells.push(iou_and_recall_cell(sequence.ground_truth.has_masks(), at));
         }
         out += &row(&cells);
     }
