@@ -41,6 +41,21 @@ pub fn workspace_root() -> PathBuf {
         .to_path_buf()
 }
 
+/// The exported network the tests run: `EVGATE_TEST_MODEL`, or else the committed
+/// `models/evgate-S.onnx`; a missing file fails the test that asked.
+pub fn test_model_path() -> PathBuf {
+    let path = std::env::var_os("EVGATE_TEST_MODEL")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("models/evgate-S.onnx"));
+    assert!(
+        path.is_file(),
+        "these tests need the exported network {} (committed as models/evgate-S.onnx; \
+         EVGATE_TEST_MODEL overrides the path) and it is missing",
+        path.display()
+    );
+    path
+}
+
 /// target/<profile>/, where cargo puts the binaries of the profile the tests were built with.
 pub fn binary_directory() -> PathBuf {
     let exe = std::env::current_exe().expect("the test executable has a path");

@@ -2,29 +2,16 @@
 //! policy and judges by forecasts again once a new inference process publishes.
 //! Needs the bundled model (models/evgate-S.onnx, or EVGATE_TEST_MODEL) and `.ort/`.
 
-use std::path::PathBuf;
 use std::time::Duration;
 
-use evgate_e2e::{start_service, unique_names, wait_until, workspace_root};
+use evgate_e2e::{start_service, test_model_path, unique_names, wait_until};
 use evgate_ipc::{create_node, LatestSubscriber, PipelineStats, Stream};
 
 const TIMEOUT: Duration = Duration::from_secs(120);
 
-fn model() -> PathBuf {
-    let model = std::env::var_os("EVGATE_TEST_MODEL")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace_root().join("models/evgate-S.onnx"));
-    assert!(
-        model.is_file(),
-        "{} is missing: the bundled model (or set EVGATE_TEST_MODEL)",
-        model.display()
-    );
-    model
-}
-
 #[test]
 fn killing_infer_leaves_the_gate_on_its_policy_and_a_new_infer_takes_over() {
-    let model = model();
+    let model = test_model_path();
     let model = model.to_str().unwrap();
     let names = unique_names("failover");
     let node = create_node("failover-test").unwrap();

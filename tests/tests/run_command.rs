@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use evgate_e2e::{binary, u64_at, workspace_root, Process};
+use evgate_e2e::{binary, test_model_path, u64_at, Process};
 
 const TIMEOUT: Duration = Duration::from_secs(120);
 
@@ -46,14 +46,7 @@ fn run_without_inference_passes_everything_and_scores_it_against_the_labels() {
 
 #[test]
 fn run_with_the_bundled_model_reports_inference_and_scores() {
-    let model = std::env::var_os("EVGATE_TEST_MODEL")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| workspace_root().join("models/evgate-S.onnx"));
-    assert!(
-        model.is_file(),
-        "{} is missing: it is the bundled model `evgate run` uses (or set EVGATE_TEST_MODEL)",
-        model.display()
-    );
+    let model = test_model_path();
     let mut run = Process::start(
         &evgate(),
         &[

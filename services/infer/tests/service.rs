@@ -2,38 +2,24 @@
 //! exits. Uses the committed `models/evgate-S.onnx` (`EVGATE_TEST_MODEL` overrides the path);
 //! the synthetic stream is 346 × 260, the sensor that model is exported for.
 
-use std::path::PathBuf;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use evgate_core::{words_for, Event, SensorSize};
+use evgate_e2e::test_model_path;
 use evgate_ipc::{
     create_node, BatchFlags, BatchHeader, ForecastHeader, PipelineNames, Qos, SlicePublisher,
     SliceSubscriber, Stream, MAX_HORIZONS,
 };
 
-const COMMITTED_MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/evgate-S.onnx");
 const SENSOR: SensorSize = SensorSize::new(346, 260);
 const BATCH_US: i64 = 10_000;
-
-fn model_path() -> PathBuf {
-    let path = std::env::var_os("EVGATE_TEST_MODEL")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(COMMITTED_MODEL));
-    assert!(
-        path.is_file(),
-        "these tests need the exported network {} (committed as models/evgate-S.onnx; \
-         EVGATE_TEST_MODEL overrides the path) and it is missing",
-        path.display()
-    );
-    path
-}
 
 fn infer_command(domain: &str) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_evgate-infer"));
     command
         .arg("--model")
-        .arg(model_path())
+        .arg(test_model_path())
         .args(["--domain", domain, "--camera", "cam", "--threads", "1"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
@@ -216,7 +202,11 @@ fn sigint_stops_the_service_cleanly_with_its_stats() {
     let output = wait_for_exit(child, Duration::from_secs(30), || {});
     let report = successful_exit_report(&output);
     assert_eq!(report["windows-closed"], 0, "{report}");
-    assert_eq!(report["model"].as_str(), model_path().to_str(), "{report}");
+    assert_eq!(
+        report["model"].as_str(),
+        test_model_path().to_str(),
+        "{report}"
+    );
     assert!(report["inference"]["count"] == 0, "{report}");
 }
 
