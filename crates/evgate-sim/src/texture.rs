@@ -135,9 +135,9 @@ impl Texture {
         Texture::from_texels(size, texels)
     }
 
-    /// The texel quads of each mip level, finest first (see `Level::quads`).
-    pub fn level_quads(&self) -> Vec<&[[f32; 4]]> {
-        self.levels.iter().map(|level| &level.quads[..]).collect()
+    /// The texels of each mip level (row-major), finest first.
+    pub fn level_texels(&self) -> Vec<&[f32]> {
+        self.levels.iter().map(|level| &level.texels[..]).collect()
     }
 
     /// Side of level 0 in texels.
