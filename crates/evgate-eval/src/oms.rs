@@ -113,28 +113,24 @@ fn gaussian_kernel(radius: u32) -> Vec<f32> {
 /// Separable blur with zeros outside the frame.
 fn gaussian_blur(frame: &[f32], size: SensorSize, radius: u32) -> Vec<f32> {
     let kernel = gaussian_kernel(radius);
-    let (width, height, r) = (size.width as i64, size.height as i64, radius as i64);
-    let mut rows_done = vec![0.0f32; frame.len()];
-    for y in 0..height {
-        for x in 0..width {
-            let mut sum = 0.0;
-            for (k, weight) in kernel.iter().enumerate() {
-                let sx = x + k as i64 - r;
-                if (0..width).contains(&sx) {
-                    sum += weight * frame[(y * width + sx) as usize];
-                }
-            }
-            rows_done[(y * width + x) as usize] = sum;
-        }
-    }
+    let rows_done = blur_along(frame, size, &kernel, (1, 0));
+    blur_along(&rows_done, size, &kernel, (0, 1))
+}
+
+/// One pass of the separable blur: each pixel becomes the `kernel`-weighted sum of the pixels
+/// centred on it along `step` (x, y); pixels outside the frame count as zero.
+fn blur_along(frame: &[f32], size: SensorSize, kernel: &[f32], step: (i64, i64)) -> Vec<f32> {
+    let (width, height) = (size.width as i64, size.height as i64);
+    let r = (kernel.len() / 2) as i64;
     let mut blurred = vec![0.0f32; frame.len()];
     for y in 0..height {
         for x in 0..width {
             let mut sum = 0.0;
             for (k, weight) in kernel.iter().enumerate() {
-                let sy = y + k as i64 - r;
-                if (0..height).contains(&sy) {
-                    sum += weight * rows_done[(sy * width + x) as usize];
+                let offset = k as i64 - r;
+                let (sx, sy) = (x + offset * step.0, y + offset * step.1);
+                if (0..width).contains(&sx) && (0..height).contains(&sy) {
+                    sum += weight * frame[(sy * width + sx) as usize];
                 }
             }
             blurred[(y * width + x) as usize] = sum;
