@@ -57,6 +57,7 @@ impl RecordFormat for DatRecords {
     const RECORD_BYTES: usize = RECORD_BYTES;
     const RECORD_NAME: &'static str = "a DAT record";
 
+    #[inline]
     fn decode_record(
         &mut self,
         offset: u64,

@@ -140,6 +140,7 @@ impl RecordFormat for EvimoRows {
     const RECORD_BYTES: usize = RECORD_BYTES;
     const RECORD_NAME: &'static str = "an EVIMO event row";
 
+    #[inline]
     fn decode_record(
         &mut self,
         offset: u64,

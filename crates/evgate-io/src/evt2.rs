@@ -42,6 +42,7 @@ impl RecordFormat for Evt2Words {
     const RECORD_BYTES: usize = 4;
     const RECORD_NAME: &'static str = "an EVT 2.0 word";
 
+    #[inline]
     fn decode_record(
         &mut self,
         offset: u64,

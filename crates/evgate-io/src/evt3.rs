@@ -118,6 +118,7 @@ impl RecordFormat for Evt3Words {
     const RECORD_BYTES: usize = 2;
     const RECORD_NAME: &'static str = "an EVT 3.0 word";
 
+    #[inline]
     fn decode_record(
         &mut self,
         offset: u64,

@@ -105,6 +105,7 @@ impl RecordFormat for NativeRecords {
     const RECORD_BYTES: usize = RECORD_BYTES;
     const RECORD_NAME: &'static str = "an .evg record";
 
+    #[inline]
     fn decode_record(
         &mut self,
         offset: u64,

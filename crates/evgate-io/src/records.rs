@@ -22,7 +22,9 @@ pub trait RecordFormat: Send {
     const RECORD_NAME: &'static str;
 
     /// Decodes one record (`RECORD_BYTES` long, at file offset `offset`) into `out` through
-    /// `admission`.
+    /// `admission`. Implementations are `#[inline]`: the loop below calls this once per record,
+    /// and without the hint the call stayed out of line (`.evg` and DAT decoded about 40 %
+    /// slower in the decode bench).
     fn decode_record(
         &mut self,
         offset: u64,
