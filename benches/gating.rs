@@ -2,30 +2,16 @@
 //! against a mask covering about a fifth of a 346×260 sensor.
 
 mod cpu_time;
+mod uniform_events;
 
 use criterion::measurement::Measurement;
 use criterion::{black_box, Criterion, Throughput};
 use evgate_core::{keep_bitmap, partition, BitMask, Event, ForecastView, GateMode, SensorSize};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use uniform_events::{uniform_events, EVENTS};
 
-const EVENTS: usize = 1_000_000;
-const WINDOW_US: i64 = 50_000;
 const SENSOR: SensorSize = SensorSize::new(346, 260);
-
-fn uniform_events() -> Vec<Event> {
-    let mut rng = ChaCha8Rng::seed_from_u64(11);
-    (0..EVENTS)
-        .map(|index| {
-            Event::new(
-                index as i64 * WINDOW_US / EVENTS as i64,
-                rng.gen_range(0..SENSOR.width),
-                rng.gen_range(0..SENSOR.height),
-                rng.gen(),
-            )
-        })
-        .collect()
-}
 
 /// Random pixels set with probability 0.2: keep decisions are unpredictable, which is what the
 /// branch-free kernel is built for.
@@ -43,7 +29,7 @@ fn random_mask(rng: &mut ChaCha8Rng) -> BitMask {
 /// Runs under wall time (`gate`) and under the thread's CPU time (`gate-cpu`), the latter for
 /// a figure that other jobs on the machine move less.
 fn gating<M: Measurement>(criterion: &mut Criterion<M>, group_name: &str) {
-    let events = uniform_events();
+    let events = uniform_events(SENSOR, 11);
     let mut rng = ChaCha8Rng::seed_from_u64(13);
     let mask = random_mask(&mut rng);
     let horizons_us = [0, 20_000, 40_000, 60_000];

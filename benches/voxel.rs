@@ -3,15 +3,12 @@
 //! windows.
 
 mod cpu_time;
+mod uniform_events;
 
 use criterion::measurement::Measurement;
 use criterion::{black_box, BenchmarkId, Criterion, Throughput};
 use evgate_core::{Event, SensorSize, TimeSpan, TimeWindow, VoxelGrid, WindowsByDuration};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-
-const EVENTS: usize = 1_000_000;
-const WINDOW_US: i64 = 50_000;
+use uniform_events::{uniform_events, EVENTS, WINDOW_US};
 
 /// Real recordings, relative to this package's manifest (shared/ sits beside the repository).
 const RECORDINGS: [&str; 2] = [
@@ -24,22 +21,6 @@ const RECORDINGS: [&str; 2] = [
         "/../../shared/data/real/evt2_sample.raw"
     ),
 ];
-
-/// Time-sorted events spread uniformly over the sensor: the cache-unfriendliest layout, so the
-/// figure is a floor for real, spatially clustered streams.
-fn uniform_events(sensor: SensorSize) -> Vec<Event> {
-    let mut rng = ChaCha8Rng::seed_from_u64(7);
-    (0..EVENTS)
-        .map(|index| {
-            Event::new(
-                index as i64 * WINDOW_US / EVENTS as i64,
-                rng.gen_range(0..sensor.width),
-                rng.gen_range(0..sensor.height),
-                rng.gen(),
-            )
-        })
-        .collect()
-}
 
 /// A decoded recording and its 50 ms windows (one window over the whole span when the
 /// recording is no longer than that, so that no window holds a lone trailing event).
@@ -108,7 +89,7 @@ fn voxelisation<M: Measurement>(criterion: &mut Criterion<M>, group_name: &str) 
     let mut group = criterion.benchmark_group(group_name);
     group.throughput(Throughput::Elements(EVENTS as u64));
     for sensor in [SensorSize::new(346, 260), SensorSize::new(640, 480)] {
-        let events = uniform_events(sensor);
+        let events = uniform_events(sensor, 7);
         let mut grid = VoxelGrid::new(sensor, 2).expect("sensor and bins are valid");
         group.bench_with_input(
             BenchmarkId::new("accumulate", sensor),
