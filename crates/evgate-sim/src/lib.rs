@@ -1,8 +1,9 @@
 //! evgate-sim: a synthetic event camera with ground truth.
 //!
 //! A pinhole camera with smooth 6-DoF ego-motion looks at a static world of textured planes at
-//! several depths and at independently moving textured objects. The scene is ray-cast as often
-//! as its fastest image motion requires, and an ESIM-style pixel model (per-pixel thresholds,
+//! several depths and at independently moving textured objects. The static world is ray-cast
+//! as often as its own image motion requires (and interpolated in between), the objects as
+//! often as theirs, and an ESIM-style pixel model (per-pixel thresholds,
 //! interpolated timestamps, refractory period, shot and leak noise, hot pixels) turns log
 //! intensity changes into events labelled with the surface that caused them. Ground truth
 //! (instance masks, depth, forward flow over any horizon) can be queried at any time.
