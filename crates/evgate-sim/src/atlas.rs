@@ -104,6 +104,13 @@ impl TextureAtlas {
             _mm256_andnot_ps(fine_only, _mm256_castsi256_ps(has_next)),
             blends,
         );
+        let mut out = [0.0f32; 8];
+        // Where no lane blends with a coarser level (all footprints within a texel, say), its
+        // gathers are skipped, as the scalar path skips the second bilinear sample.
+        if _mm256_movemask_ps(use_coarser) == 0 {
+            _mm256_storeu_ps(out.as_mut_ptr(), a);
+            return out;
+        }
         let coarser_level = _mm256_min_epi32(next, _mm256_sub_epi32(level_counts, one_i));
         let half = _mm256_set1_ps(0.5);
         let b = self.bilinear8(
@@ -114,7 +121,6 @@ impl TextureAtlas {
             _mm256_mul_ps(vs, half),
         );
         let mixed = _mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), blend));
-        let mut out = [0.0f32; 8];
         _mm256_storeu_ps(out.as_mut_ptr(), _mm256_blendv_ps(a, mixed, use_coarser));
         out
     }
