@@ -11,6 +11,8 @@
 use std::collections::VecDeque;
 use std::num::NonZeroUsize;
 use std::ops::Range;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, PoisonError};
 
 use evgate_core::SensorSize;
 use rand::SeedableRng;
@@ -289,29 +291,28 @@ impl Simulator {
                         band,
                     },
                 );
-            // Bands are dealt out in turn, so every worker gets rows from the whole image
-            // (the cost per row varies: objects, near floors).
-            let mut per_worker: Vec<Vec<BandJob<'_>>> =
-                (0..self.threads).map(|_| Vec::new()).collect();
-            for (i, job) in jobs.enumerate() {
-                per_worker[i % self.threads].push(job);
-            }
+            // Workers take the next band as they finish one, so that a worker with costlier
+            // rows (objects, near floors) or less CPU (a shared machine) holds the step up
+            // less than with bands dealt out in advance.
+            let queue: Vec<Mutex<Option<BandJob<'_>>>> =
+                jobs.map(|job| Mutex::new(Some(job))).collect();
+            let next_band = AtomicUsize::new(0);
             let interval = &interval;
-            let run_all = move |list: Vec<BandJob<'_>>| {
+            let (queue, next_band) = (&queue, &next_band);
+            let run_all = move || {
                 let mut out = Vec::new();
                 let mut scratch = interval.background.row_scratch();
-                for job in list {
-                    job.run(interval, &mut scratch, &mut out);
+                while let Some(slot) = queue.get(next_band.fetch_add(1, Ordering::Relaxed)) {
+                    let job = slot.lock().unwrap_or_else(PoisonError::into_inner).take();
+                    if let Some(job) = job {
+                        job.run(interval, &mut scratch, &mut out);
+                    }
                 }
                 out
             };
             std::thread::scope(|scope| {
-                let mut lists = per_worker.into_iter();
-                let own = lists.next().unwrap_or_default();
-                let helpers: Vec<_> = lists
-                    .map(|list| scope.spawn(move || run_all(list)))
-                    .collect();
-                events = run_all(own);
+                let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
+                events = run_all();
                 for helper in helpers {
                     events.extend(
                         helper
