@@ -111,3 +111,51 @@ fn a_looping_replay_runs_until_sigint_and_then_ends_the_stream_cleanly() {
     );
     assert_eq!(gate_summary["balanced"], true);
 }
+
+#[test]
+fn a_reader_that_connects_after_the_whole_recording_was_published_still_gets_all_of_it() {
+    let recording = workspace_root().join("../shared/data/real/evt3_sample.raw");
+    let mut reader = evgate_io::open(&recording).expect("the shared EVT 3.0 sample decodes");
+    let events = evgate_io::read_all(reader.as_mut()).expect("decodes").len() as u64;
+
+    let names = unique_names("late-reader");
+    let node = evgate_ipc::create_node("late-reader-test").unwrap();
+    let subscriber =
+        evgate_ipc::SliceSubscriber::<evgate_core::Event, evgate_ipc::BatchHeader>::open(
+            &node,
+            &names,
+            evgate_ipc::Stream::Events,
+            &evgate_ipc::Qos::default(),
+        )
+        .unwrap();
+    let mut ingest = start_service(
+        "evgate-ingest",
+        &names,
+        &[
+            "--json",
+            "--fast",
+            "--input",
+            recording.to_str().unwrap(),
+            "--wait-for-subscribers",
+            "1",
+        ],
+    )
+    .unwrap();
+    // The 9 ms recording is published within this pause, before the reader's first receive
+    // connects it to the publisher; the publisher must still be there when it does.
+    std::thread::sleep(Duration::from_secs(1));
+    let mut received = 0;
+    let mut ended = false;
+    evgate_e2e::wait_until("the end-of-stream batch", TIMEOUT, || {
+        while let Some(sample) = subscriber.receive().unwrap() {
+            received += sample.payload().len() as u64;
+            ended |= sample.user_header().is_end_of_stream();
+        }
+        ended
+    })
+    .unwrap();
+    drop(subscriber);
+    let summary = ingest.summary(TIMEOUT).unwrap();
+    assert_eq!(received, events);
+    assert_eq!(u64_at(&summary, "/events-published"), events);
+}

@@ -398,10 +398,12 @@ where
         } else {
             builder
         };
+        // The listener must exist before the subscriber becomes visible: a publisher may send
+        // and notify the moment it sees the subscriber, and a wake-up sent to no listener is lost.
+        let listener = open_listener(node, &service_name)?;
         let subscriber = builder
             .create()
             .map_err(|error| port_error(&service_name, "subscriber", error))?;
-        let listener = open_listener(node, &service_name)?;
         Ok(Self {
             service_name,
             subscriber,
@@ -495,12 +497,13 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
         stream: Stream,
     ) -> Result<Self, PortError> {
         let service_name = names.service(stream)?;
+        // Listener first, as in `SliceSubscriber::open`, so no wake-up is lost.
+        let listener = open_listener(node, &service_name)?;
         let subscriber = open_value_service::<T>(node, &service_name)?
             .subscriber_builder()
             .history_request(ServiceLimits::LATEST_HISTORY)
             .create()
             .map_err(|error| port_error(&service_name, "subscriber", error))?;
-        let listener = open_listener(node, &service_name)?;
         Ok(Self {
             service_name,
             subscriber,

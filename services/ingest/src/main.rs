@@ -84,6 +84,11 @@ struct Args {
     /// Longest wait for a full subscriber under --overflow block, milliseconds.
     #[arg(long, default_value_t = 500)]
     block_timeout_ms: u64,
+    /// After the end of the stream, keep the publisher open until every events subscriber has
+    /// left or this many milliseconds passed: iceoryx2 drops the samples of a publisher that
+    /// leaves before a reader has connected to it, so a short recording could vanish unread.
+    #[arg(long, default_value_t = 2000)]
+    linger_ms: u64,
     /// Print a JSON summary on stdout when done.
     #[arg(long)]
     json: bool,
@@ -312,7 +317,7 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
         publish_end_of_stream(&events, labels.as_ref(), stream_id, sensor, &mut totals)?;
     }
     progress.finish_and_clear();
-    Ok(summary_of(
+    let summary = summary_of(
         &description,
         sensor,
         stream_id,
@@ -320,7 +325,11 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
         started,
         ended_by,
         labels.is_some(),
-    ))
+    );
+    if ended_by == "end-of-stream" {
+        linger_until_subscribers_leave(&node, &events, Duration::from_millis(args.linger_ms));
+    }
+    Ok(summary)
 }
 
 /// Counts of what was published.
@@ -404,6 +413,28 @@ fn wait_for_subscribers(
         }
     }
     Ok(true)
+}
+
+/// Keeps the events publisher (and so its unread samples) alive until the readers have left,
+/// the linger time has passed, or a signal arrived.
+fn linger_until_subscribers_leave(
+    node: &evgate_ipc::Node,
+    events: &SlicePublisher<Event, BatchHeader>,
+    linger: Duration,
+) {
+    let deadline = Instant::now() + linger;
+    while events.subscriber_count() > 0 && Instant::now() < deadline {
+        if node.wait(Duration::from_millis(5)).is_err() {
+            return;
+        }
+    }
+    if events.subscriber_count() > 0 {
+        info!(
+            subscribers = events.subscriber_count(),
+            linger_ms = linger.as_millis() as u64,
+            "readers still connected at the end of the linger time"
+        );
+    }
 }
 
 fn summary_of(
