@@ -17,6 +17,7 @@ import torch
 from torch import nn
 
 from .checkpoint import load_checkpoint
+from .export_network import export_forward
 from .graph_rewrite import split_concatenated_convolutions
 from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork, check_input_size, check_warp_resolution
 from .voxel import WINDOW_US
@@ -40,11 +41,10 @@ class ContractWrapper(nn.Module):
 
     def forward(self, voxel, horizons_ms, state_0, state_1, state_2, state_3):
         states = [state_0, state_1, state_2, state_3]
-        out = self.network(voxel, horizons_ms.unsqueeze(0), states, warp_resolution=self.warp_resolution)
         # The flow leaves at the flow decoder's resolution (metadata evgate.flow-stride): nothing
         # in the graph needs it at full resolution, and upsampling 2K planes there cost more
         # than the warp itself on CPU.
-        return (out.mask_logits, out.future_mask_logits, out.coarse_flow, *out.states)
+        return export_forward(self.network, voxel, horizons_ms, states, self.warp_resolution)
 
 
 def example_inputs(network: SuppressionNetwork, height: int, width: int, horizons: int = 2) -> tuple[torch.Tensor, ...]:
