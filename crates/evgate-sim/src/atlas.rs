@@ -98,13 +98,25 @@ impl TextureAtlas {
         for &t in texture {
             assert!((t as usize) < self.level_counts.len(), "texture {t}");
         }
+        // Where all lanes sample one texture, its sizes are broadcast instead of gathered.
+        let uniform = texture.iter().all(|&t| t == texture[0]);
+        let first = texture[0] as usize;
         let texture = _mm256_loadu_si256(texture.as_ptr().cast());
         let (u, v) = (_mm256_loadu_ps(u.as_ptr()), _mm256_loadu_ps(v.as_ptr()));
         let footprint = _mm256_loadu_ps(footprint.as_ptr());
         // SAFETY (all gathers): every index is a valid texture (asserted above), a level
         // below its count, or a texel inside that level (masked by its size).
-        let level_counts = _mm256_i32gather_epi32::<4>(self.level_counts.as_ptr(), texture);
-        let size_log2 = _mm256_i32gather_epi32::<4>(self.size_log2.as_ptr(), texture);
+        let (level_counts, size_log2) = if uniform {
+            (
+                _mm256_set1_epi32(self.level_counts[first]),
+                _mm256_set1_epi32(self.size_log2[first]),
+            )
+        } else {
+            (
+                _mm256_i32gather_epi32::<4>(self.level_counts.as_ptr(), texture),
+                _mm256_i32gather_epi32::<4>(self.size_log2.as_ptr(), texture),
+            )
+        };
         let one_i = _mm256_set1_epi32(1);
         // approximate_log2(footprint), clamped to the coarsest level.
         let bits = _mm256_castps_si256(footprint);
@@ -269,7 +281,12 @@ mod tests {
             .collect();
         let atlas = TextureAtlas::new(&textures);
         for _ in 0..2000 {
-            let texture: [i32; 8] = std::array::from_fn(|_| rng.gen_range(0..4));
+            // Half the blocks sample one texture in every lane (the broadcast path).
+            let texture: [i32; 8] = if rng.gen_bool(0.5) {
+                [rng.gen_range(0..4); 8]
+            } else {
+                std::array::from_fn(|_| rng.gen_range(0..4))
+            };
             let u: [f32; 8] = std::array::from_fn(|_| rng.gen_range(-300.0..300.0));
             let v: [f32; 8] = std::array::from_fn(|_| rng.gen_range(-300.0..300.0));
             let footprint: [f32; 8] = std::array::from_fn(|_| 2f32.powf(rng.gen_range(-2.0..8.0)));

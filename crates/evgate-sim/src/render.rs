@@ -481,8 +481,18 @@ impl<'a> Snapshot<'a> {
         let mut panels = [0i32; 8];
         _mm256_storeu_si256(panels.as_mut_ptr().cast(), panel);
         assert!(panels.iter().all(|&p| (0..count).contains(&p)));
+        // Most blocks lie on one panel: their constants are loaded once and broadcast rather
+        // than gathered lane by lane (the same values, hence the same bits).
+        let uniform = panels.iter().all(|&p| p == panels[0]);
+        let first = panels[0] as usize;
         // SAFETY (gathers): every lane's panel index is below the panel count (asserted).
-        let gather = |values: &Vec<f32>| _mm256_i32gather_ps::<4>(values.as_ptr(), panel);
+        let gather = |values: &Vec<f32>| {
+            if uniform {
+                _mm256_set1_ps(values[first])
+            } else {
+                _mm256_i32gather_ps::<4>(values.as_ptr(), panel)
+            }
+        };
         let [dx, dy, dz] = [
             &scratch.directions.x,
             &scratch.directions.y,
@@ -550,7 +560,11 @@ impl<'a> Snapshot<'a> {
         );
         _mm256_storeu_si256(
             texels.texture.as_mut_ptr().cast(),
-            _mm256_i32gather_epi32::<4>(lanes.texture.as_ptr(), panel),
+            if uniform {
+                _mm256_set1_epi32(lanes.texture[first])
+            } else {
+                _mm256_i32gather_epi32::<4>(lanes.texture.as_ptr(), panel)
+            },
         );
         let mut dark_lanes = [0i32; 8];
         _mm256_storeu_si256(dark_lanes.as_mut_ptr().cast(), dark);
