@@ -46,7 +46,9 @@ def export_forward(
     bottleneck = network.residual(x)
     skips = new_states[:-1][::-1]
     half_mask_logits = network.mask_decoder(bottleneck, network.mask_decoder.project_skips(skips))
-    mask_logits = upsample(half_mask_logits)
+    # The (shape-preserving) reshape keeps ONNX Runtime from upsampling the one logit channel in
+    # its blocked layout, where it is padded to a block of 8 channels: 8x the work.
+    mask_logits = upsample(half_mask_logits.reshape(1, 1, height // 2, width // 2))
 
     conditioned = condition_horizons(network.time_conditioning, network.flow_features(bottleneck), horizons_ms)
     # The projected skips stay [1, ...]: the decoder adds them to its [K, ...] features.
