@@ -33,7 +33,7 @@ MAX_HORIZON_MS = 100.0
 
 
 class ParitySetupError(ValueError):
-    """An export spec that is not NAME=FILE.onnx, or exports that disagree on their input size."""
+    """An export spec that is not NAME=FILE.onnx naming an existing file."""
 
 
 def parse_export(spec: str) -> tuple[str, Path]:
@@ -69,7 +69,9 @@ def main(argv: list[str] | None = None) -> int:
         warp_resolutions[name] = metadata.get("evgate.warp-resolution", "full")
         input_sizes.add(tuple(sessions[name].get_inputs()[0].shape[2:]))
     if len(input_sizes) != 1 or len(set(warp_resolutions.values())) != 1:
-        raise ParitySetupError(f"exports differ in input size {input_sizes} or warp resolution {warp_resolutions}")
+        parser.error(
+            f"--export: the exports differ in input size {sorted(input_sizes)} or warp resolution {warp_resolutions}"
+        )
     (height, width), warp_resolution = input_sizes.pop(), warp_resolutions[exports[0][0]]
     horizons = np.linspace(MAX_HORIZON_MS / HORIZON_COUNT, MAX_HORIZON_MS, HORIZON_COUNT).astype(np.float32)
 
@@ -107,12 +109,17 @@ def main(argv: list[str] | None = None) -> int:
                     difference = np.abs(got - want)
                     allowed = TOLERANCE + TOLERANCE * np.abs(want)
                     largest[name][output] = max(largest[name][output], float(difference.max()))
-                    tolerance_ratio[name][output] = max(tolerance_ratio[name][output], float((difference / allowed).max()))
+                    ratio = float((difference / allowed).max())
+                    tolerance_ratio[name][output] = max(tolerance_ratio[name][output], ratio)
                     if output == "future_mask_logits":
                         over_tolerance[name] += int((difference > allowed).sum())
                         sign_changes[name] += int(((got > 0) != (want > 0)).sum())
             future_values += expected[1].size
             states = out.states
+    if not used:
+        parser.error(
+            f"--data {args.data}: no .npz sequence fits the exports' input of {width}x{height} (width x height)"
+        )
     report = {
         "checkpoint": str(args.checkpoint),
         "exports": {name: str(path) for name, path in exports},
