@@ -196,14 +196,17 @@ fn add_value_noise(texels: &mut [f32], size: usize, weight: f32, rng: &mut impl 
             .map(|_| rng.gen_range(-1.0..1.0))
             .collect();
         let cell = size as f32 / cells as f32;
-        for y in 0..size {
-            let gy = y as f32 / cell;
-            let (y0, fy) = (gy.floor() as usize % cells, smoothstep(gy.fract()));
-            let y1 = (y0 + 1) % cells;
-            for x in 0..size {
-                let gx = x as f32 / cell;
-                let (x0, fx) = (gx.floor() as usize % cells, smoothstep(gx.fract()));
-                let x1 = (x0 + 1) % cells;
+        // The grid cells and blend weight of each column (rows use the same), computed once
+        // per octave rather than once per texel.
+        let lattice: Vec<(usize, usize, f32)> = (0..size)
+            .map(|i| {
+                let g = i as f32 / cell;
+                let (low, blend) = (g.floor() as usize % cells, smoothstep(g.fract()));
+                (low, (low + 1) % cells, blend)
+            })
+            .collect();
+        for (y, &(y0, y1, fy)) in lattice.iter().enumerate() {
+            for (x, &(x0, x1, fx)) in lattice.iter().enumerate() {
                 let top = grid[y0 * cells + x0] * (1.0 - fx) + grid[y0 * cells + x1] * fx;
                 let bottom = grid[y1 * cells + x0] * (1.0 - fx) + grid[y1 * cells + x1] * fx;
                 texels[y * size + x] += amplitude * (top * (1.0 - fy) + bottom * fy);
