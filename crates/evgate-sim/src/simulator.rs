@@ -305,7 +305,12 @@ impl Simulator {
                 while let Some(slot) = queue.get(next_band.fetch_add(1, Ordering::Relaxed)) {
                     let job = slot.lock().unwrap_or_else(PoisonError::into_inner).take();
                     if let Some(job) = job {
+                        let first = out.len();
                         job.run(interval, &mut scratch, &mut out);
+                        // Sorted here, in parallel, each band's events leave the step's final
+                        // sort (below) little more than merging runs; a stable sort within a
+                        // band keeps the final order exactly what it would be without.
+                        out[first..].sort_by_key(event_order);
                     }
                 }
                 out
@@ -331,7 +336,7 @@ impl Simulator {
             .emit(t1, refractory, &mut self.state, &mut self.rng, &mut events);
         // Time, then row and column: the order does not depend on how rows were shared out
         // (a stable sort keeps one pixel's events in the order it produced them).
-        events.sort_by_key(|e| (e.event.t, e.event.y, e.event.x));
+        events.sort_by_key(event_order);
         self.pending.extend(events);
         self.rendered_us = t1;
         self.stats.renders += interval.samples.len() as u64 - 1;
@@ -468,6 +473,11 @@ impl Simulator {
         });
         flow
     }
+}
+
+/// The order of the delivered events: time, then row and column.
+fn event_order(labelled: &LabelledEvent) -> (i64, u16, u16) {
+    (labelled.event.t, labelled.event.y, labelled.event.x)
 }
 
 fn shift(a: (f32, f32), b: (f32, f32)) -> f32 {
