@@ -91,6 +91,9 @@ pub struct Simulator {
     next_background: Frame,
     rendered_us: i64,
     delivered_us: i64,
+    /// The last step's events, each band's sorted but not yet merged: the next step merges
+    /// them into `pending` while its helpers render, or `advance` before it delivers.
+    unsorted: Vec<LabelledEvent>,
     pending: VecDeque<LabelledEvent>,
     threads: usize,
     stats: SimStats,
@@ -177,6 +180,7 @@ impl Simulator {
             next_background: frame,
             rendered_us: 0,
             delivered_us: 0,
+            unsorted: Vec::new(),
             pending: VecDeque::new(),
             threads,
             stats: SimStats::default(),
@@ -224,6 +228,7 @@ impl Simulator {
         while self.rendered_us < t_end_us {
             self.step();
         }
+        sort_into(&mut self.unsorted, &mut self.pending);
         while let Some(next) = self.pending.front() {
             if next.event.t > t_end_us {
                 break;
@@ -315,8 +320,12 @@ impl Simulator {
                 }
                 out
             };
+            let (unsorted, pending) = (&mut self.unsorted, &mut self.pending);
             std::thread::scope(|scope| {
                 let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
+                // The previous step's merge, which would leave the helpers idle between
+                // steps, overlaps their rendering of this one.
+                sort_into(unsorted, pending);
                 events = run_all();
                 for helper in helpers {
                     events.extend(
@@ -334,10 +343,7 @@ impl Simulator {
         let refractory = self.config.events.refractory_us;
         self.noise
             .emit(t1, refractory, &mut self.state, &mut self.rng, &mut events);
-        // Time, then row and column: the order does not depend on how rows were shared out
-        // (a stable sort keeps one pixel's events in the order it produced them).
-        events.sort_by_key(event_order);
-        self.pending.extend(events);
+        self.unsorted = events;
         self.rendered_us = t1;
         self.stats.renders += interval.samples.len() as u64 - 1;
         self.stats.background_renders += 1;
@@ -473,6 +479,14 @@ impl Simulator {
         });
         flow
     }
+}
+
+/// Sorts `events` (a concatenation of sorted runs) and moves them to the end of `pending`.
+/// Time, then row and column: the order does not depend on how rows were shared out (a stable
+/// sort keeps one pixel's events in the order it produced them).
+fn sort_into(events: &mut Vec<LabelledEvent>, pending: &mut VecDeque<LabelledEvent>) {
+    events.sort_by_key(event_order);
+    pending.extend(events.drain(..));
 }
 
 /// The order of the delivered events: time, then row and column.
