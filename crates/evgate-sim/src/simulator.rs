@@ -77,6 +77,16 @@ pub struct SimStats {
     pub simulated_us: i64,
 }
 
+impl SimStats {
+    fn record(&mut self, delivered: &[LabelledEvent]) {
+        for labelled in delivered {
+            self.events += 1;
+            self.on_events += labelled.event.is_on() as u64;
+            self.object_events += (labelled.label != 0) as u64;
+        }
+    }
+}
+
 /// A deterministic (given config and seed) simulated event camera with ground truth.
 pub struct Simulator {
     config: SimConfig,
@@ -225,28 +235,34 @@ impl Simulator {
     /// Appends to `out` the events in `(time_us(), t_end_us]`, in time order. The events do not
     /// depend on how the time is split into calls.
     pub fn advance(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
-        while self.rendered_us < t_end_us {
-            self.step();
-        }
-        sort_into(&mut self.unsorted, &mut self.pending);
+        // Pending events precede those of every step still to come.
         while let Some(next) = self.pending.front() {
             if next.event.t > t_end_us {
                 break;
             }
             let labelled = *next;
             self.pending.pop_front();
-            self.stats.events += 1;
-            self.stats.on_events += labelled.event.is_on() as u64;
-            self.stats.object_events += (labelled.label != 0) as u64;
+            self.stats.record(std::slice::from_ref(&labelled));
             out.push(labelled);
         }
+        while self.rendered_us < t_end_us {
+            self.step(t_end_us, out);
+        }
+        deliver(
+            &mut self.unsorted,
+            &mut self.pending,
+            t_end_us,
+            out,
+            &mut self.stats,
+        );
         self.delivered_us = self.delivered_us.max(t_end_us);
         self.stats.simulated_us = self.delivered_us;
     }
 
     /// One step of the static world, sized by its image motion, with the objects sampled at
     /// their own rate within it.
-    fn step(&mut self) {
+    /// The previous step's events are delivered meanwhile (see [`deliver`]).
+    fn step(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
         let t0 = self.rendered_us;
         let t1 = t0 + self.static_step_us(t0);
         let width = self.config.sensor.width as usize;
@@ -320,12 +336,13 @@ impl Simulator {
                 }
                 out
             };
-            let (unsorted, pending) = (&mut self.unsorted, &mut self.pending);
+            let (unsorted, pending, stats) =
+                (&mut self.unsorted, &mut self.pending, &mut self.stats);
             std::thread::scope(|scope| {
                 let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
                 // The previous step's merge, which would leave the helpers idle between
                 // steps, overlaps their rendering of this one.
-                sort_into(unsorted, pending);
+                deliver(unsorted, pending, t_end_us, out, stats);
                 events = run_all();
                 for helper in helpers {
                     events.extend(
@@ -481,12 +498,28 @@ impl Simulator {
     }
 }
 
-/// Sorts `events` (a concatenation of sorted runs) and moves them to the end of `pending`.
-/// Time, then row and column: the order does not depend on how rows were shared out (a stable
-/// sort keeps one pixel's events in the order it produced them).
-fn sort_into(events: &mut Vec<LabelledEvent>, pending: &mut VecDeque<LabelledEvent>) {
+/// Sorts a step's `events` (a concatenation of sorted runs), which follow those in `pending`,
+/// and moves them on: those due by `t_end_us` straight to `out` where nothing is pending
+/// (rather than through the queue), the others to `pending`. Time, then row and column: the
+/// order does not depend on how rows were shared out (a stable sort keeps one pixel's events in
+/// the order it produced them).
+fn deliver(
+    events: &mut Vec<LabelledEvent>,
+    pending: &mut VecDeque<LabelledEvent>,
+    t_end_us: i64,
+    out: &mut Vec<LabelledEvent>,
+    stats: &mut SimStats,
+) {
     events.sort_by_key(event_order);
-    pending.extend(events.drain(..));
+    let due = if pending.is_empty() {
+        events.partition_point(|labelled| labelled.event.t <= t_end_us)
+    } else {
+        0
+    };
+    stats.record(&events[..due]);
+    out.extend_from_slice(&events[..due]);
+    pending.extend(events.drain(due..));
+    events.clear();
 }
 
 /// The order of the delivered events: time, then row and column.
