@@ -20,9 +20,17 @@ fn uneven_calls_deliver_the_stream_and_counts_of_one_call() {
     for end in [1, 700, 700, 2_345, 2_346, 19_000, 19_001, 55_555, 90_000] {
         split.advance(end, &mut pieces);
         assert!(pieces.iter().all(|e| e.event.t <= end), "event after {end}");
-        assert_eq!(split.stats().events as usize, pieces.len(), "count at {end}");
+        assert_eq!(
+            split.stats().events as usize,
+            pieces.len(),
+            "count at {end}"
+        );
     }
-    assert!(whole.len() > 1_000, "too few events ({}) to check", whole.len());
+    assert!(
+        whole.len() > 1_000,
+        "too few events ({}) to check",
+        whole.len()
+    );
     assert_eq!(whole, pieces);
     assert_eq!(one_call.stats(), split.stats());
     let on = whole.iter().filter(|e| e.event.is_on()).count();
