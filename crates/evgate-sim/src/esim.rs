@@ -168,22 +168,39 @@ impl PixelBand<'_> {
         out: &mut Vec<LabelledEvent>,
     ) {
         const BLOCK: usize = 8;
+        // Blocks with a crossing are listed first and their state that only a crossing reads
+        // is prefetched: it is rarely in cache, and its loads would otherwise stall each
+        // crossing in turn. A run is handled in chunks so that the list has a fixed size.
+        const CHUNK_BLOCKS: usize = 64;
         let first = pixels.start;
-        for start in (0..pixels.len()).step_by(BLOCK) {
-            let end = (start + BLOCK).min(pixels.len());
-            let block = first + start..first + end;
-            let crossing = log_intensity[start..end]
-                .iter()
-                .zip(&self.reference[block.clone()])
-                .zip(
-                    self.threshold_on[block.clone()]
-                        .iter()
-                        .zip(&self.threshold_off[block]),
-                )
-                .fold(false, |any, ((&l1, &reference), (&on, &off))| {
-                    any | (l1 - reference >= on) | (reference - l1 >= off)
-                });
-            if crossing {
+        for chunk_start in (0..pixels.len()).step_by(BLOCK * CHUNK_BLOCKS) {
+            let chunk_end = (chunk_start + BLOCK * CHUNK_BLOCKS).min(pixels.len());
+            let mut crossing_blocks = [0usize; CHUNK_BLOCKS];
+            let mut crossings = 0;
+            for start in (chunk_start..chunk_end).step_by(BLOCK) {
+                let end = (start + BLOCK).min(chunk_end);
+                let block = first + start..first + end;
+                let crossing = log_intensity[start..end]
+                    .iter()
+                    .zip(&self.reference[block.clone()])
+                    .zip(
+                        self.threshold_on[block.clone()]
+                            .iter()
+                            .zip(&self.threshold_off[block.clone()]),
+                    )
+                    .fold(false, |any, ((&l1, &reference), (&on, &off))| {
+                        any | (l1 - reference >= on) | (reference - l1 >= off)
+                    });
+                if crossing {
+                    crossing_blocks[crossings] = start;
+                    crossings += 1;
+                    prefetch(&self.last_event_us[block.start]);
+                    prefetch(&self.last_event_us[block.end - 1]);
+                    prefetch(&self.previous[block.start]);
+                }
+            }
+            for &start in &crossing_blocks[..crossings] {
+                let end = (start + BLOCK).min(chunk_end);
                 for (i, &l1) in (first + start..).zip(&log_intensity[start..end]) {
                     let reference = self.reference[i];
                     if l1 - reference >= self.threshold_on[i]
@@ -243,6 +260,19 @@ impl PixelBand<'_> {
         }
         self.reference[i] = reference;
     }
+}
+
+/// Asks the CPU to bring `value`'s cache line closer, without waiting for it.
+#[inline(always)]
+fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch never faults and changes no memory; SSE is part of x86-64.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((value as *const T).cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
 }
 
 /// A standard normal draw (Box–Muller), avoiding a dependency for one distribution.
