@@ -684,7 +684,8 @@ impl<'a> Snapshot<'a> {
         }
         let first_column = columns.start;
         self.nearest_panels(y, columns, scratch);
-        for (k, (log, id)) in log_intensity.iter_mut().zip(surface.iter_mut()).enumerate() {
+        let mut batch = TexelBatch::default();
+        for (k, id) in surface.iter_mut().enumerate() {
             let direction = scratch.directions.at(k);
             if let Some(hit) = self.nearest_object(
                 (first_column + k) as f32,
@@ -692,10 +693,13 @@ impl<'a> Snapshot<'a> {
                 scratch.nearest_depth[k],
                 &scratch.active_objects,
             ) {
-                *log = self.shade(&hit.material, direction, hit.depth);
                 *id = hit.id;
+                if batch.push(k, self.material_texel(&hit.material, direction, hit.depth)) {
+                    batch.shade_into(self.scene, log_intensity);
+                }
             }
         }
+        batch.shade_into(self.scene, log_intensity);
     }
 
     /// Widens `region` (one column range per sensor row; empty where nothing is marked) to
@@ -923,16 +927,23 @@ impl<'a> Snapshot<'a> {
     }
 
     fn shade(&self, material: &Material, direction: Vec3, depth: f32) -> f32 {
-        let scene = self.scene;
+        let texel = self.material_texel(material, direction, depth);
+        self.scene.textures[texel.texture].sample(texel.u, texel.v, texel.footprint)
+            + texel.log_illumination
+    }
+
+    /// What [`Snapshot::shade`] samples, and the light it adds.
+    #[inline(always)]
+    fn material_texel(&self, material: &Material, direction: Vec3, depth: f32) -> PanelTexel {
         let cos_incidence = (material.normal.dot(direction).abs() / direction.length()).max(0.05);
-        let metres_per_pixel = depth / (scene.intrinsics.fx * cos_incidence);
-        let texture = &scene.textures[material.texture];
-        let log_reflectance = texture.sample(
-            material.u * material.texels_per_m,
-            material.v * material.texels_per_m,
-            metres_per_pixel * material.texels_per_m,
-        );
-        log_reflectance + material.log_illumination
+        let metres_per_pixel = depth / (self.scene.intrinsics.fx * cos_incidence);
+        PanelTexel {
+            texture: material.texture,
+            u: material.u * material.texels_per_m,
+            v: material.v * material.texels_per_m,
+            footprint: metres_per_pixel * material.texels_per_m,
+            log_illumination: material.log_illumination,
+        }
     }
 }
 
@@ -951,7 +962,72 @@ struct Material {
     log_illumination: f32,
 }
 
-/// A panel's texture, the texel coordinates and footprint where a ray meets it, and its light.
+/// Up to eight pixels' texture samples, taken together: with AVX2 gathers from the atlas
+/// where the CPU has them (the same bits as [`Texture::sample`](crate::texture::Texture)),
+/// rather than one scattered lookup after another.
+#[derive(Default)]
+struct TexelBatch {
+    pixels: [usize; 8],
+    texture: [i32; 8],
+    u: [f32; 8],
+    v: [f32; 8],
+    footprint: [f32; 8],
+    log_illumination: [f32; 8],
+    len: usize,
+}
+
+impl TexelBatch {
+    /// Adds pixel `pixel`'s sample; true when the batch is full.
+    fn push(&mut self, pixel: usize, texel: PanelTexel) -> bool {
+        let k = self.len;
+        self.pixels[k] = pixel;
+        self.texture[k] = texel.texture as i32;
+        self.u[k] = texel.u;
+        self.v[k] = texel.v;
+        self.footprint[k] = texel.footprint;
+        self.log_illumination[k] = texel.log_illumination;
+        self.len += 1;
+        self.len == 8
+    }
+
+    /// Writes each pixel's log intensity (sample plus light) into `log_intensity` and empties
+    /// the batch.
+    fn shade_into(&mut self, scene: &Scene, log_intensity: &mut [f32]) {
+        let len = std::mem::take(&mut self.len);
+        if len == 0 {
+            return;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // Unused lanes repeat the first pixel's sample, which is valid.
+            for k in len..8 {
+                self.texture[k] = self.texture[0];
+                self.u[k] = self.u[0];
+                self.v[k] = self.v[0];
+                self.footprint[k] = self.footprint[0];
+            }
+            // SAFETY: the CPU has AVX2 (checked above); the textures are the scene's.
+            let sampled = unsafe {
+                scene
+                    .atlas
+                    .sample8(&self.texture, &self.u, &self.v, &self.footprint)
+            };
+            for k in 0..len {
+                log_intensity[self.pixels[k]] = sampled[k] + self.log_illumination[k];
+            }
+            return;
+        }
+        for k in 0..len {
+            log_intensity[self.pixels[k]] = scene.textures[self.texture[k] as usize].sample(
+                self.u[k],
+                self.v[k],
+                self.footprint[k],
+            ) + self.log_illumination[k];
+        }
+    }
+}
+
+/// A surface's texture, the texel coordinates and footprint where a ray meets it, and its light.
 struct PanelTexel {
     texture: usize,
     u: f32,
