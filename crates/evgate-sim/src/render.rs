@@ -333,8 +333,9 @@ impl<'a> Snapshot<'a> {
     ///
     /// A row is rendered in passes over its columns: the panels are searched panel after
     /// panel, then the texture coordinates and footprint of every panel hit are computed, in
-    /// plain loops that the compiler vectorises; the texture lookups and the moving objects
-    /// (within their bounds only) follow pixel by pixel. Every pixel still sees the same
+    /// plain loops that the compiler vectorises; the texture lookups follow, and the moving
+    /// objects (within their bounds only) are intersected pixel by pixel and shaded in
+    /// batches of eight. Every pixel still sees the same
     /// operations in the same order as [`Snapshot::trace`], so the output is bit-identical to
     /// tracing pixel by pixel.
     pub fn render_rows_with(
@@ -403,6 +404,7 @@ impl<'a> Snapshot<'a> {
             else {
                 continue;
             };
+            let mut batch = TexelBatch::default();
             for column in columns {
                 let direction = scratch.directions.at(column);
                 if let Some(hit) = self.nearest_object(
@@ -412,11 +414,14 @@ impl<'a> Snapshot<'a> {
                     &scratch.active_objects,
                 ) {
                     let i = pixels.start + column;
-                    log_intensity[i] = self.shade(&hit.material, direction, hit.depth);
                     surface[i] = hit.id;
                     depth[i] = hit.depth;
+                    if batch.push(i, self.material_texel(&hit.material, direction, hit.depth)) {
+                        batch.shade_into(self.scene, log_intensity);
+                    }
                 }
             }
+            batch.shade_into(self.scene, log_intensity);
         }
     }
 
