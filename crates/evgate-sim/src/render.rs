@@ -188,7 +188,16 @@ pub struct RowScratch {
     directions: RowDirections,
     nearest_depth: Vec<f32>,
     nearest_panel: Vec<u32>,
+    row_panels: Vec<RowPanel>,
     active_objects: Vec<usize>,
+}
+
+/// A panel that may be the nearest along some rays of a row: its index and the columns (from
+/// the first searched one) where its screen bounds put it.
+struct RowPanel {
+    index: usize,
+    start: usize,
+    end: usize,
 }
 
 /// World-frame ray directions of one row, one array per component so that loops over columns
@@ -197,12 +206,6 @@ struct RowDirections {
     x: Vec<f32>,
     y: Vec<f32>,
     z: Vec<f32>,
-}
-
-struct DirectionSlice<'a> {
-    x: &'a [f32],
-    y: &'a [f32],
-    z: &'a [f32],
 }
 
 impl RowDirections {
@@ -223,14 +226,6 @@ impl RowDirections {
             self.x[c] = direction.x;
             self.y[c] = direction.y;
             self.z[c] = direction.z;
-        }
-    }
-
-    fn slice(&self, columns: Range<usize>) -> DirectionSlice<'_> {
-        DirectionSlice {
-            x: &self.x[columns.clone()],
-            y: &self.y[columns.clone()],
-            z: &self.z[columns],
         }
     }
 
@@ -615,6 +610,7 @@ impl<'a> Snapshot<'a> {
             directions: RowDirections::new(width),
             nearest_depth: vec![f32::INFINITY; width],
             nearest_panel: vec![NO_PANEL; width],
+            row_panels: Vec::with_capacity(self.scene.panels.len()),
             active_objects: Vec::with_capacity(self.objects.len()),
         }
     }
@@ -631,8 +627,7 @@ impl<'a> Snapshot<'a> {
             &scratch.ray_x[columns.clone()],
             ray_y,
         );
-        scratch.nearest_depth[..n].fill(f32::INFINITY);
-        scratch.nearest_panel[..n].fill(NO_PANEL);
+        scratch.row_panels.clear();
         for (i, bounds) in self.panel_bounds.iter().enumerate() {
             if bounds.contains_row(y) {
                 let on_panel = bounds.columns(width);
@@ -643,15 +638,20 @@ impl<'a> Snapshot<'a> {
                 }
                 let local = start - columns.start..end - columns.start;
                 if !self.plane_behind(i, &scratch.directions, local.clone()) {
-                    self.nearest_on_panel(
-                        i,
-                        &scratch.directions.slice(local.clone()),
-                        &mut scratch.nearest_depth[local.clone()],
-                        &mut scratch.nearest_panel[local],
-                    );
+                    scratch.row_panels.push(RowPanel {
+                        index: i,
+                        start: local.start,
+                        end: local.end,
+                    });
                 }
             }
         }
+        self.nearest_on_panels(
+            &scratch.directions,
+            &scratch.row_panels,
+            &mut scratch.nearest_depth[..n],
+            &mut scratch.nearest_panel[..n],
+        );
     }
 
     /// Whether the rays `directions[columns]` of one row all meet panel `i`'s plane behind
@@ -737,68 +737,95 @@ impl<'a> Snapshot<'a> {
         }
     }
 
-    /// Lowers `nearest_depth` (and records panel `i` in `nearest_panel`) where the rays in
-    /// `directions` meet panel `i` closer than anything found so far: the per-pixel test of
-    /// [`Snapshot::trace`], written without branches so that it vectorises.
+    /// The nearest of `panels` along each ray in `directions` (and its depth), or
+    /// [`NO_PANEL`] (at infinity): the per-pixel test of [`Snapshot::trace`], panel after panel
+    /// in index order, written without branches so that it vectorises. Eight pixels at a time
+    /// keep their nearest depth and panel in registers over all panels and store them once: a
+    /// pass per panel over the row stored them back after every panel, which LLVM compiled to
+    /// masked stores, slow on AMD Zen.
     #[inline(always)]
-    fn nearest_on_panel(
+    fn nearest_on_panels(
         &self,
-        i: usize,
-        directions: &DirectionSlice<'_>,
+        directions: &RowDirections,
+        panels: &[RowPanel],
         nearest_depth: &mut [f32],
         nearest_panel: &mut [u32],
     ) {
-        let plane = &self.panel_planes[i];
-        let panel = &self.scene.panels[i];
-        let origin = self.camera.translation;
         let n = nearest_depth.len();
         let (xs, ys, zs) = (&directions.x[..n], &directions.y[..n], &directions.z[..n]);
         let nearest_panel = &mut nearest_panel[..n];
-        match panel.half_extent {
-            None => {
-                // In blocks of fixed length with the selects written as bit masks: LLVM
-                // turned the plain indexed loop into scalar code with a branch per pixel.
-                let blocks = n / LANES * LANES;
-                for start in (0..blocks).step_by(LANES) {
-                    let block = start..start + LANES;
-                    let (bx, by, bz) = (&xs[block.clone()], &ys[block.clone()], &zs[block.clone()]);
-                    let depth = &mut nearest_depth[block.clone()];
-                    let id = &mut nearest_panel[block];
-                    let mut distance = [0.0f32; LANES];
+        let origin = self.camera.translation;
+        let blocks = n / LANES * LANES;
+        for start in (0..blocks).step_by(LANES) {
+            let block = start..start + LANES;
+            let (bx, by, bz) = (&xs[block.clone()], &ys[block.clone()], &zs[block.clone()]);
+            let mut depth = [f32::INFINITY; LANES];
+            let mut id = [NO_PANEL; LANES];
+            for row_panel in panels {
+                if row_panel.end <= start || row_panel.start >= block.end {
+                    continue;
+                }
+                let i = row_panel.index;
+                let plane = &self.panel_planes[i];
+                let mut distance = [0.0f32; LANES];
+                for k in 0..LANES {
+                    distance[k] = plane.offset / plane.normal.dot(Vec3::new(bx[k], by[k], bz[k]));
+                }
+                // Lanes of columns outside the panel's bounds, or off a bounded panel, keep
+                // what they have.
+                let mut eligible = [true; LANES];
+                for (k, eligible) in eligible.iter_mut().enumerate() {
+                    let column = start + k;
+                    *eligible = (column >= row_panel.start) & (column < row_panel.end);
+                }
+                let panel = &self.scene.panels[i];
+                if let Some((hu, hv)) = panel.half_extent {
                     for k in 0..LANES {
-                        distance[k] =
-                            plane.offset / plane.normal.dot(Vec3::new(bx[k], by[k], bz[k]));
-                    }
-                    for k in 0..LANES {
-                        let closer = (distance[k] > 1e-3) & (distance[k] < depth[k]);
-                        let mask = (closer as u32).wrapping_neg();
-                        depth[k] = f32::from_bits(
-                            (distance[k].to_bits() & mask) | (depth[k].to_bits() & !mask),
-                        );
-                        id[k] = (i as u32 & mask) | (id[k] & !mask);
+                        let direction = Vec3::new(bx[k], by[k], bz[k]);
+                        let relative = origin + direction * distance[k] - panel.origin;
+                        // Non-short-circuit `&` and `|` keep the loop free of branches.
+                        eligible[k] &= !((relative.dot(panel.axis_u).abs() > hu)
+                            | (relative.dot(panel.axis_v).abs() > hv));
                     }
                 }
-                for c in blocks..n {
-                    let direction = Vec3::new(xs[c], ys[c], zs[c]);
-                    let distance = plane.offset / plane.normal.dot(direction);
-                    let closer = (distance > 1e-3) & (distance < nearest_depth[c]);
-                    nearest_depth[c] = if closer { distance } else { nearest_depth[c] };
-                    nearest_panel[c] = if closer { i as u32 } else { nearest_panel[c] };
+                for k in 0..LANES {
+                    let closer = (distance[k] > 1e-3) & (distance[k] < depth[k]) & eligible[k];
+                    let mask = (closer as u32).wrapping_neg();
+                    depth[k] = f32::from_bits(
+                        (distance[k].to_bits() & mask) | (depth[k].to_bits() & !mask),
+                    );
+                    id[k] = (i as u32 & mask) | (id[k] & !mask);
                 }
             }
-            Some((hu, hv)) => {
-                for c in 0..n {
-                    let direction = Vec3::new(xs[c], ys[c], zs[c]);
-                    let distance = plane.offset / plane.normal.dot(direction);
-                    let relative = origin + direction * distance - panel.origin;
-                    // Non-short-circuit `&` and `|` keep the loop free of branches.
-                    let inside = !((relative.dot(panel.axis_u).abs() > hu)
-                        | (relative.dot(panel.axis_v).abs() > hv));
-                    let closer = (distance > 1e-3) & (distance < nearest_depth[c]) & inside;
-                    nearest_depth[c] = if closer { distance } else { nearest_depth[c] };
-                    nearest_panel[c] = if closer { i as u32 } else { nearest_panel[c] };
+            nearest_depth[block.clone()].copy_from_slice(&depth);
+            nearest_panel[block].copy_from_slice(&id);
+        }
+        for c in blocks..n {
+            let direction = Vec3::new(xs[c], ys[c], zs[c]);
+            let (mut depth, mut id) = (f32::INFINITY, NO_PANEL);
+            for row_panel in panels {
+                if c < row_panel.start || c >= row_panel.end {
+                    continue;
+                }
+                let i = row_panel.index;
+                let plane = &self.panel_planes[i];
+                let distance = plane.offset / plane.normal.dot(direction);
+                let panel = &self.scene.panels[i];
+                let inside = match panel.half_extent {
+                    None => true,
+                    Some((hu, hv)) => {
+                        let relative = origin + direction * distance - panel.origin;
+                        !((relative.dot(panel.axis_u).abs() > hu)
+                            | (relative.dot(panel.axis_v).abs() > hv))
+                    }
+                };
+                if (distance > 1e-3) & (distance < depth) & inside {
+                    depth = distance;
+                    id = i as u32;
                 }
             }
+            nearest_depth[c] = depth;
+            nearest_panel[c] = id;
         }
     }
 
