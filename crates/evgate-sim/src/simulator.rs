@@ -104,6 +104,9 @@ pub struct Simulator {
     /// The last step's events, each band's sorted but not yet merged: the next step merges
     /// them into `pending` while its helpers render, or `advance` before it delivers.
     unsorted: Vec<LabelledEvent>,
+    /// The static world's step from `rendered_us`, sized during the step before (by its main
+    /// thread, while the helpers render).
+    next_static_step_us: Option<i64>,
     pending: VecDeque<LabelledEvent>,
     threads: usize,
     stats: SimStats,
@@ -191,6 +194,7 @@ impl Simulator {
             rendered_us: 0,
             delivered_us: 0,
             unsorted: Vec::new(),
+            next_static_step_us: None,
             pending: VecDeque::new(),
             threads,
             stats: SimStats::default(),
@@ -264,7 +268,11 @@ impl Simulator {
     /// The previous step's events are delivered meanwhile (see [`deliver`]).
     fn step(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
         let t0 = self.rendered_us;
-        let t1 = t0 + self.static_step_us(t0);
+        let step_us = self
+            .next_static_step_us
+            .take()
+            .unwrap_or_else(|| Simulator::static_step_us(&self.scene, &self.config, t0));
+        let t1 = t0 + step_us;
         let width = self.config.sensor.width as usize;
         let height = self.config.sensor.height as usize;
         let mut samples = vec![Sample::at(&self.scene, t0, t0, t1)];
@@ -338,11 +346,14 @@ impl Simulator {
             };
             let (unsorted, pending, stats) =
                 (&mut self.unsorted, &mut self.pending, &mut self.stats);
+            let (scene, config) = (&self.scene, &self.config);
+            let next_static_step_us = &mut self.next_static_step_us;
             std::thread::scope(|scope| {
                 let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
-                // The previous step's merge, which would leave the helpers idle between
-                // steps, overlaps their rendering of this one.
+                // The previous step's merge and the next step's motion probe, which would
+                // leave the helpers idle between steps, overlap their rendering of this one.
                 deliver(unsorted, pending, t_end_us, out, stats);
+                *next_static_step_us = Some(Simulator::static_step_us(scene, config, t1));
                 events = run_all();
                 for helper in helpers {
                     events.extend(
@@ -368,8 +379,8 @@ impl Simulator {
 
     /// Largest image displacement of the points in `now` after [`MOTION_PROBE_US`] in
     /// `later`, as a step that keeps it within `max-step-px`.
-    fn step_for_shift(&self, max_shift: f32) -> i64 {
-        let model = &self.config.events;
+    fn step_for_shift(config: &SimConfig, max_shift: f32) -> i64 {
+        let model = &config.events;
         let speed_px_per_us = max_shift / MOTION_PROBE_US as f32;
         let step = if speed_px_per_us > 0.0 {
             (model.max_step_px / speed_px_per_us) as i64
@@ -381,11 +392,11 @@ impl Simulator {
 
     /// The step from `t_us` that keeps the largest image displacement of the static world (a
     /// grid of sample pixels) within `max-step-px`.
-    fn static_step_us(&self, t_us: i64) -> i64 {
-        let now = Snapshot::static_world(&self.scene, t_us as f32 * 1e-6);
-        let later = Snapshot::static_world(&self.scene, (t_us + MOTION_PROBE_US) as f32 * 1e-6);
-        let k = &self.config.intrinsics;
-        let sensor = self.config.sensor;
+    fn static_step_us(scene: &Scene, config: &SimConfig, t_us: i64) -> i64 {
+        let now = Snapshot::static_world(scene, t_us as f32 * 1e-6);
+        let later = Snapshot::static_world(scene, (t_us + MOTION_PROBE_US) as f32 * 1e-6);
+        let k = &config.intrinsics;
+        let sensor = config.sensor;
         let mut max_shift = 0.0f32;
         for y in (MOTION_PROBE_GRID_PX / 2..sensor.height as usize).step_by(MOTION_PROBE_GRID_PX) {
             for x in (MOTION_PROBE_GRID_PX / 2..sensor.width as usize).step_by(MOTION_PROBE_GRID_PX)
@@ -398,7 +409,7 @@ impl Simulator {
                 }
             }
         }
-        self.step_for_shift(max_shift)
+        Simulator::step_for_shift(config, max_shift)
     }
 
     /// The step from `t_us` (whose snapshot is `now`) that keeps the largest image
@@ -430,7 +441,7 @@ impl Simulator {
                 }
             }
         }
-        self.step_for_shift(max_shift)
+        Simulator::step_for_shift(&self.config, max_shift)
     }
 
     /// Renders the scene at `t_us` (log intensity, surface id, depth) without touching the
