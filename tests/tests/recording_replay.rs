@@ -1,16 +1,23 @@
 //! A real recording replayed by evgate-ingest reaches the gate event for event, in real time.
 
+use std::path::PathBuf;
 use std::time::Duration;
 
 use evgate_e2e::{start_service, u64_at, unique_names, workspace_root};
 
 const TIMEOUT: Duration = Duration::from_secs(90);
 
-#[test]
-fn a_real_evt3_recording_reaches_the_gate_event_for_event_at_its_own_pace() {
+/// The shared 9 ms EVT 3.0 recording and its decoded events.
+fn evt3_sample() -> (PathBuf, Vec<evgate_core::Event>) {
     let recording = workspace_root().join("../shared/data/real/evt3_sample.raw");
     let mut reader = evgate_io::open(&recording).expect("the shared EVT 3.0 sample decodes");
-    let decoded = evgate_io::read_all(reader.as_mut()).expect("the shared EVT 3.0 sample decodes");
+    let events = evgate_io::read_all(reader.as_mut()).expect("the shared EVT 3.0 sample decodes");
+    (recording, events)
+}
+
+#[test]
+fn a_real_evt3_recording_reaches_the_gate_event_for_event_at_its_own_pace() {
+    let (recording, decoded) = evt3_sample();
     let span_s = (decoded.last().unwrap().t - decoded[0].t) as f64 * 1e-6;
 
     let names = unique_names("replay");
@@ -54,9 +61,8 @@ fn a_real_evt3_recording_reaches_the_gate_event_for_event_at_its_own_pace() {
 
 #[test]
 fn a_looping_replay_runs_until_sigint_and_then_ends_the_stream_cleanly() {
-    let recording = workspace_root().join("../shared/data/real/evt3_sample.raw");
-    let mut reader = evgate_io::open(&recording).expect("the shared EVT 3.0 sample decodes");
-    let per_pass = evgate_io::read_all(reader.as_mut()).expect("decodes").len() as u64;
+    let (recording, decoded) = evt3_sample();
+    let per_pass = decoded.len() as u64;
 
     let names = unique_names("loop");
     let node = evgate_ipc::create_node("loop-test").unwrap();
@@ -114,9 +120,8 @@ fn a_looping_replay_runs_until_sigint_and_then_ends_the_stream_cleanly() {
 
 #[test]
 fn a_reader_that_connects_after_the_whole_recording_was_published_still_gets_all_of_it() {
-    let recording = workspace_root().join("../shared/data/real/evt3_sample.raw");
-    let mut reader = evgate_io::open(&recording).expect("the shared EVT 3.0 sample decodes");
-    let events = evgate_io::read_all(reader.as_mut()).expect("decodes").len() as u64;
+    let (recording, decoded) = evt3_sample();
+    let events = decoded.len() as u64;
 
     let names = unique_names("late-reader");
     let node = evgate_ipc::create_node("late-reader-test").unwrap();
