@@ -1,8 +1,10 @@
 //! Every texel of every texture of a scene in one array, so that eight texture samples (of any
-//! textures and mip levels) are taken at once with AVX2 gathers. The same operations in the
-//! same order as [`Texture::sample`], hence the same bits. Plain texels rather than the
-//! textures' 4-texel quads: the gathers fetch single values either way, and a quarter of the
-//! memory misses the caches less. Each level is stored in 4×4-texel tiles, one 64-byte cache
+//! textures and mip levels) are taken at once with AVX2: the arithmetic in 8-lane vectors, the
+//! texels read by eight scalar loads each (AMD Zen runs gather instructions as microcode,
+//! slower than the loads they are made of). The same operations in the same order as
+//! [`Texture::sample`], hence the same bits. Plain texels rather than the textures' 4-texel
+//! quads: each read fetches single values either way, and a quarter of the memory misses the
+//! caches less. Each level is stored in 4×4-texel tiles, one 64-byte cache
 //! line each: a bilinear footprint then mostly lies in one line, and a row of pixels crossing
 //! the texture in any direction touches fewer lines than with row-major texels.
 
@@ -104,7 +106,7 @@ impl TextureAtlas {
         let texture = _mm256_loadu_si256(texture.as_ptr().cast());
         let (u, v) = (_mm256_loadu_ps(u.as_ptr()), _mm256_loadu_ps(v.as_ptr()));
         let footprint = _mm256_loadu_ps(footprint.as_ptr());
-        // SAFETY (all gathers): every index is a valid texture (asserted above), a level
+        // SAFETY (all gathers and loads): every index is a valid texture (asserted above), a level
         // below its count, or a texel inside that level (masked by its size).
         let (level_counts, size_log2) = if uniform {
             (
