@@ -351,8 +351,8 @@ impl<'a> Snapshot<'a> {
     }
 
     /// [`Snapshot::render_rows_portable`] compiled for AVX2, whose 8-lane vectors double the
-    /// width of the vectorised passes, with textures sampled eight pixels at a time by
-    /// gathers. Without FMA (Rust never fuses on its own) every operation rounds as in the
+    /// width of the vectorised passes, with textures sampled eight pixels at a time from the
+    /// atlas. Without FMA (Rust never fuses on its own) every operation rounds as in the
     /// portable build: the output is the same bit for bit.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
@@ -994,9 +994,9 @@ struct Material {
     log_illumination: f32,
 }
 
-/// Up to eight pixels' texture samples, taken together: with AVX2 gathers from the atlas
-/// where the CPU has them (the same bits as [`Texture::sample`](crate::texture::Texture)),
-/// rather than one scattered lookup after another.
+/// Up to eight pixels' texture samples, taken together: by the atlas's 8-lane AVX2 sampler
+/// where the CPU has AVX2 (the same bits as [`Texture::sample`](crate::texture::Texture)),
+/// rather than one pixel's whole sample after another.
 #[derive(Default)]
 struct TexelBatch {
     pixels: [usize; 8],
