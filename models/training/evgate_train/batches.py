@@ -1,6 +1,7 @@
 """Random training chunks: B sequences x L consecutive windows, one crop and one augmentation
 per chunk, collated into tensors window by window."""
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +26,18 @@ class WindowBatch:
     future_flow: torch.Tensor  # [B, K, 2, S, S]
     flow_valid: torch.Tensor  # [B, K, S, S]
     future_events: list[list[FutureEvents]]  # [B][K]
+
+    def to(self, device: torch.device | str) -> "WindowBatch":
+        """The tensors on `device`; the future events stay numpy arrays (the objective moves
+        them per sample, as their counts differ)."""
+        return dataclasses.replace(
+            self,
+            **{
+                field.name: getattr(self, field.name).to(device, non_blocking=True)
+                for field in dataclasses.fields(self)
+                if isinstance(getattr(self, field.name), torch.Tensor)
+            },
+        )
 
 
 def collate(windows: list) -> WindowBatch:

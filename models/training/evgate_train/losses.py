@@ -13,7 +13,7 @@ def bce_dice(
     soft Dice loss; tensors share one shape."""
     valid = valid.to(logits.dtype)
     bce = F.binary_cross_entropy_with_logits(
-        logits, target, reduction="none", pos_weight=torch.tensor(positive_weight, dtype=logits.dtype)
+        logits, target, reduction="none", pos_weight=torch.tensor(positive_weight, dtype=logits.dtype, device=logits.device)
     )
     loss = (bce * valid).sum() / valid.sum().clamp_min(1.0)
     if dice_weight > 0:

@@ -136,10 +136,12 @@ class SuppressionNetwork(nn.Module):
         )
         self.flow_stride = 2 ** (STAGES - FLOW_DECODER_LEVELS)
 
-    def initial_states(self, batch: int, height: int, width: int) -> list[torch.Tensor]:
+    def initial_states(
+        self, batch: int, height: int, width: int, device: torch.device | str = "cpu"
+    ) -> list[torch.Tensor]:
         check_input_size(height, width)
         return [
-            torch.zeros(batch, c, height >> (stage + 1), width >> (stage + 1))
+            torch.zeros(batch, c, height >> (stage + 1), width >> (stage + 1), device=device)
             for stage, c in enumerate(self.config.state_channels)
         ]
 

@@ -49,12 +49,13 @@ def window_objective(
             horizon = float(batch.horizons_ms[sample, k])
             if horizon < weights.contrast_min_horizon_ms or len(events.x) < weights.contrast_min_events:
                 continue
+            device = out.velocity.device
             contrast_terms.append(
                 average_timestamp_loss(
-                    torch.from_numpy(events.x),
-                    torch.from_numpy(events.y),
-                    torch.from_numpy(events.t_ms),
-                    torch.from_numpy(events.on),
+                    torch.from_numpy(events.x).to(device),
+                    torch.from_numpy(events.y).to(device),
+                    torch.from_numpy(events.t_ms).to(device),
+                    torch.from_numpy(events.on).to(device),
                     out.velocity[sample, k],
                     horizon,
                 )
@@ -70,7 +71,7 @@ def window_objective(
     with torch.no_grad():
         predicted, truth = out.mask_logits > 0, batch.mask > 0.5
         union = (predicted | truth).sum()
-        iou = (predicted & truth).sum() / union if union > 0 else torch.ones(())
+        iou = (predicted & truth).sum() / union if union > 0 else union.new_ones((), dtype=torch.float32)
     return {
         "total": total,
         "mask_iou": iou,

@@ -43,5 +43,9 @@ def backward_warp_normalised(image: torch.Tensor, normalised_flow: torch.Tensor)
     rows, cols = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
     # Pixel centre x sits at (2x + 1) / width - 1 when corners are not aligned.
     positions = np.stack([(2 * cols + 1) / width - 1, (2 * rows + 1) / height - 1], axis=-1)
-    grid = torch.from_numpy(positions[None].astype(np.float32)) - normalised_flow.permute(0, 2, 3, 1)
+    pixel_grid = torch.from_numpy(positions[None].astype(np.float32))
+    if normalised_flow.device.type != "cpu":
+        # A trace-time branch: the export (on CPU) keeps the grid a plain constant.
+        pixel_grid = pixel_grid.to(normalised_flow.device)
+    grid = pixel_grid - normalised_flow.permute(0, 2, 3, 1)
     return F.grid_sample(image, grid, mode="bilinear", padding_mode="zeros", align_corners=False)

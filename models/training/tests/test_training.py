@@ -139,3 +139,42 @@ def test_arrival_flow_target_moves_the_whole_future_footprint(synthetic_dir):
     # Outside every future footprint the target is unchanged.
     outside = arrival.future_mask[k] == 0
     np.testing.assert_array_equal(arrival.future_flow[k][:, outside], forward.future_flow[k][:, outside])
+
+
+def test_loader_workers_draw_different_chunks_and_train(synthetic_dir, tmp_path):
+    from evgate_train.batches import ChunkSampler
+    from evgate_train.loader import chunk_batches
+
+    sequences = [load_sequence(p) for p in sorted(synthetic_dir.rglob("*.npz"))]
+    sampler = ChunkSampler(sequences, 2, 32, 500, True, seed=3)
+    drawn = chunk_batches(sampler, 2, workers=2, seed=3)
+    voxels = [next(drawn)[0].voxel for _ in range(4)]
+    assert all(v.shape == (2, 2, 32, 32) for v in voxels)
+    # Two workers with one seed each: the first batches of the two streams differ.
+    assert not all(np.array_equal(voxels[0].numpy(), v.numpy()) for v in voxels[1:])
+    run = tmp_path / "run"
+    train(_args(synthetic_dir, run, 2, "--loader-workers", "2"))
+    assert load_checkpoint(run / "checkpoint.pt").step == 2
+
+
+def test_time_budget_ends_the_run_and_saves_its_last_step(synthetic_dir, tmp_path):
+    from evgate_train.train import learning_rate
+
+    run = tmp_path / "run"
+    train(_args(synthetic_dir, run, 1000, "--time-budget-s", "1e-9", "--checkpoint-every", "100"))
+    assert not (run / "checkpoint.pt").exists()
+    train(_args(synthetic_dir, tmp_path / "run2", 1000, "--time-budget-s", "3", "--checkpoint-every", "100"))
+    records = [json.loads(line) for line in (tmp_path / "run2" / "log.jsonl").read_text().splitlines()]
+    assert 0 < len(records) < 1000
+    assert load_checkpoint(tmp_path / "run2" / "checkpoint.pt").step == len(records)
+    # The decay is paced by the budget: at the budget's end the rate is near its floor.
+    assert learning_rate(500, 1000, 1.0, 1, elapsed_share=1.0) == pytest.approx(0.1)
+    assert learning_rate(500, 1000, 1.0, 1, elapsed_share=0.0) > 0.5
+
+
+def test_training_rejects_a_cuda_device_torch_cannot_see(synthetic_dir, tmp_path, monkeypatch):
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with pytest.raises(TrainingSetupError, match="no CUDA device"):
+        train(_args(synthetic_dir, tmp_path / "run", 1, "--device", "cuda"))
