@@ -22,6 +22,7 @@ pub mod node;
 pub mod ports;
 pub mod qos;
 pub mod slice_writer;
+pub mod stale_service;
 pub mod stats;
 
 pub use batch::{BatchFlags, BatchHeader};

@@ -15,13 +15,18 @@ use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::{AllocationStrategy, IceoryxSend, Node, ServiceName, ZeroCopySend};
 use iceoryx2::sample::Sample;
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
-use iceoryx2::service::builder::publish_subscribe::Builder;
+use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+use iceoryx2::service::builder::publish_subscribe::{
+    Builder, PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::messaging_pattern::MessagingPattern;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use iceoryx2::service::port_factory::PortFactory as _;
 
 use crate::names::{NameError, PipelineNames, Stream};
 use crate::qos::{Overflow, Qos, ServiceLimits};
 use crate::slice_writer::SliceWriter;
+use crate::stale_service::{remove_orphaned_static_config, StaleServiceError};
 use crate::Service;
 
 /// Port failures; every variant names the service.
@@ -29,6 +34,8 @@ use crate::Service;
 pub enum PortError {
     #[error(transparent)]
     Name(#[from] NameError),
+    #[error(transparent)]
+    StaleService(#[from] StaleServiceError),
     #[error("cannot open or create service {service:?} ({pattern}): {reason}")]
     Service {
         service: String,
@@ -114,15 +121,65 @@ fn receive_error(service: &ServiceName, reason: impl Debug) -> PortError {
     }
 }
 
+/// Opens or creates a service with `open_or_create`; when that finds the service stuck in
+/// creation, removes what a dead creator left (its dead node, then a static config no live node
+/// is creating) and tries once more.
+fn open_or_recover<F, E: Debug>(
+    node: &Node<Service>,
+    name: &ServiceName,
+    pattern: MessagingPattern,
+    hangs_in_creation: impl Fn(&E) -> bool,
+    open_or_create: impl Fn() -> Result<F, E>,
+) -> Result<F, PortError> {
+    let pattern_name = match pattern {
+        MessagingPattern::Event => "event",
+        _ => "publish-subscribe",
+    };
+    match open_or_create() {
+        Err(error) if hangs_in_creation(&error) => {
+            // A dead creator that finished its static config but not the rest is removed by
+            // dead-node cleanup, unless another process was cleaning that node when ours started.
+            node.try_cleanup_dead_nodes();
+            if !remove_orphaned_static_config(node, name, pattern)? {
+                return Err(service_error(name, pattern_name, error));
+            }
+            open_or_create()
+        }
+        outcome => outcome,
+    }
+    .map_err(|error| service_error(name, pattern_name, error))
+}
+
 fn open_wakeup_service(
     node: &Node<Service>,
     name: &ServiceName,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Service>, PortError> {
-    node.service_builder(name)
-        .event()
-        .max_nodes(ServiceLimits::MAX_NODES)
-        .open_or_create()
-        .map_err(|error| service_error(name, "event", error))
+    open_or_recover(
+        node,
+        name,
+        MessagingPattern::Event,
+        |error| {
+            matches!(
+                error,
+                EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation)
+            )
+        },
+        || {
+            node.service_builder(name)
+                .event()
+                .max_nodes(ServiceLimits::MAX_NODES)
+                .open_or_create()
+        },
+    )
+}
+
+fn publish_subscribe_hangs_in_creation(error: &PublishSubscribeOpenOrCreateError) -> bool {
+    matches!(
+        error,
+        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            PublishSubscribeOpenError::HangsInCreation
+        )
+    )
 }
 
 fn open_notifier(node: &Node<Service>, name: &ServiceName) -> Result<Notifier<Service>, PortError> {
@@ -222,13 +279,19 @@ where
     T: Debug + ZeroCopySend + 'static,
     H: Debug + ZeroCopySend + 'static,
 {
-    let builder = node
-        .service_builder(name)
-        .publish_subscribe::<[T]>()
-        .user_header::<H>();
-    with_service_limits(builder, wants_latest(stream))
-        .open_or_create()
-        .map_err(|error| service_error(name, "publish-subscribe", error))
+    open_or_recover(
+        node,
+        name,
+        MessagingPattern::PublishSubscribe,
+        publish_subscribe_hangs_in_creation,
+        || {
+            let builder = node
+                .service_builder(name)
+                .publish_subscribe::<[T]>()
+                .user_header::<H>();
+            with_service_limits(builder, wants_latest(stream)).open_or_create()
+        },
+    )
 }
 
 impl<T, H> SlicePublisher<T, H>
@@ -443,9 +506,16 @@ fn open_value_service<T>(
 where
     T: Debug + ZeroCopySend + 'static,
 {
-    with_service_limits(node.service_builder(name).publish_subscribe::<T>(), true)
-        .open_or_create()
-        .map_err(|error| service_error(name, "publish-subscribe", error))
+    open_or_recover(
+        node,
+        name,
+        MessagingPattern::PublishSubscribe,
+        publish_subscribe_hangs_in_creation,
+        || {
+            with_service_limits(node.service_builder(name).publish_subscribe::<T>(), true)
+                .open_or_create()
+        },
+    )
 }
 
 /// Publishes a fixed-size value whose newest copy is all readers need (the stats).

@@ -1,0 +1,184 @@
+//! Removing a service whose creator died half-way through creating it.
+//!
+//! iceoryx2 0.10 creates a service by first writing its static config file with owner-only
+//! read-write permissions (its "locked" state), then its content, and only then makes it
+//! read-only; everyone who finds the file still writable waits for the creator. A creator killed
+//! inside that window (the content write and its fsync take milliseconds) leaves a file that stays
+//! writable forever: `open_or_create` then fails with `HangsInCreation` after the creation timeout,
+//! and dead-node cleanup does not remove it (it treats a locked static config as a service that
+//! does not exist and only drops the dead node's service tag). Every later process of that
+//! pipeline fails to start until someone deletes the file by hand.
+//!
+//! The creator registers a service tag in its node directory before it creates the static config,
+//! so a locked static config that no live node holds a tag for has a dead creator and can go.
+//! The paths follow iceoryx2 0.10's layout (`<root>/services/<prefix><hash><suffix>`,
+//! `<root>/nodes/<node id>/<prefix><hash><tag suffix>`), built from the node's own config.
+
+use std::fs::Metadata;
+use std::io::ErrorKind;
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+
+use iceoryx2::config::Config;
+use iceoryx2::node::{NodeState, NodeView};
+use iceoryx2::prelude::{CallbackProgression, Node, ServiceName};
+use iceoryx2::service::messaging_pattern::MessagingPattern;
+use iceoryx2::service::service_hash::ServiceHash;
+use tracing::warn;
+
+use crate::Service;
+
+/// The permissions of a static config that is still being created (iceoryx2's
+/// `INIT_PERMISSIONS`); a finished one is read-only.
+const LOCKED_STATIC_CONFIG_MODE: u32 = 0o600;
+
+/// Failures while looking for or removing an orphaned static config.
+#[derive(Debug, thiserror::Error)]
+pub enum StaleServiceError {
+    #[error("cannot inspect the static config {path} of service {service:?}: {source}")]
+    Inspect {
+        path: PathBuf,
+        service: String,
+        source: std::io::Error,
+    },
+    #[error("cannot remove the orphaned static config {path} of service {service:?}: {source}")]
+    Remove {
+        path: PathBuf,
+        service: String,
+        source: std::io::Error,
+    },
+    #[error("cannot list the iceoryx2 nodes to find who creates service {service:?}: {reason}")]
+    ListNodes { service: String, reason: String },
+}
+
+/// Where iceoryx2 keeps the files of one service of one messaging pattern.
+struct ServiceFiles {
+    hash: String,
+    static_config: PathBuf,
+}
+
+impl ServiceFiles {
+    fn new(config: &Config, name: &ServiceName, pattern: MessagingPattern) -> Self {
+        let hash = ServiceHash::new::<<Service as iceoryx2::service::Service>::ServiceNameHasher>(
+            name, pattern,
+        )
+        .to_string();
+        let global = &config.global;
+        let static_config = Path::new(&global.service_dir().to_string()).join(format!(
+            "{}{hash}{}",
+            global.prefix, global.service.static_config_storage_suffix
+        ));
+        Self {
+            hash,
+            static_config,
+        }
+    }
+
+    /// The service tag a node registers before it creates or opens this service.
+    fn tag_of(&self, config: &Config, node_id: u128) -> PathBuf {
+        let global = &config.global;
+        Path::new(&global.node_dir().to_string())
+            .join(node_id.to_string())
+            .join(format!(
+                "{}{}{}",
+                global.prefix, self.hash, global.node.service_tag_suffix
+            ))
+    }
+}
+
+/// Identifies one file: a new file at the same path, even on a reused inode, differs in ctime.
+fn identity(metadata: &Metadata) -> (u64, u64, i64, i64) {
+    (
+        metadata.dev(),
+        metadata.ino(),
+        metadata.ctime(),
+        metadata.ctime_nsec(),
+    )
+}
+
+fn is_locked(metadata: &Metadata) -> bool {
+    metadata.permissions().mode() & 0o7777 == LOCKED_STATIC_CONFIG_MODE
+}
+
+/// Removes the static config of `name` (messaging `pattern`) when it is stuck in creation and no
+/// live node can be its creator; true when it removed one, so opening the service again can
+/// create it afresh.
+pub fn remove_orphaned_static_config(
+    node: &Node<Service>,
+    name: &ServiceName,
+    pattern: MessagingPattern,
+) -> Result<bool, StaleServiceError> {
+    let config = node.config();
+    let files = ServiceFiles::new(config, name, pattern);
+    let service = name.as_str();
+    let inspect = |source| StaleServiceError::Inspect {
+        path: files.static_config.clone(),
+        service: service.to_owned(),
+        source,
+    };
+    let before = match std::fs::metadata(&files.static_config) {
+        Ok(metadata) => metadata,
+        Err(error) if error.kind() == ErrorKind::NotFound => return Ok(false),
+        Err(error) => return Err(inspect(error)),
+    };
+    if !is_locked(&before) || any_live_node_holds_tag(config, &files, service)? {
+        return Ok(false);
+    }
+    // The file judged orphaned must be the one removed: a process that removed it meanwhile may
+    // already be creating the service anew at the same path.
+    match std::fs::metadata(&files.static_config) {
+        Ok(now) if identity(&now) == identity(&before) && is_locked(&now) => {}
+        Ok(_) => return Ok(false),
+        Err(error) if error.kind() == ErrorKind::NotFound => return Ok(false),
+        Err(error) => return Err(inspect(error)),
+    }
+    match std::fs::remove_file(&files.static_config) {
+        Ok(()) => {}
+        Err(error) if error.kind() == ErrorKind::NotFound => return Ok(false),
+        Err(source) => {
+            return Err(StaleServiceError::Remove {
+                path: files.static_config.clone(),
+                service: service.to_owned(),
+                source,
+            })
+        }
+    }
+    warn!(
+        service,
+        path = %files.static_config.display(),
+        "removed the static config of a service whose creator died while creating it"
+    );
+    Ok(true)
+}
+
+/// Whether a node that is not known to be dead registered a tag for the service; nodes whose
+/// state cannot be told count as live, so a doubt never removes a service in creation.
+fn any_live_node_holds_tag(
+    config: &Config,
+    files: &ServiceFiles,
+    service: &str,
+) -> Result<bool, StaleServiceError> {
+    let mut holds = false;
+    Node::<Service>::list(config, |state| {
+        let id = match &state {
+            NodeState::Alive(view) => view.id(),
+            NodeState::Inaccessible(id) | NodeState::Undefined(id) => id,
+            NodeState::Dead(_) => return CallbackProgression::Continue,
+        };
+        holds = match std::fs::symlink_metadata(files.tag_of(config, id.value())) {
+            Ok(_) => true,
+            // A node directory that cannot be read may hold the tag.
+            Err(error) => error.kind() != ErrorKind::NotFound,
+        };
+        if holds {
+            CallbackProgression::Stop
+        } else {
+            CallbackProgression::Continue
+        }
+    })
+    .map_err(|error| StaleServiceError::ListNodes {
+        service: service.to_owned(),
+        reason: format!("{error:?}"),
+    })?;
+    Ok(holds)
+}

@@ -1,0 +1,126 @@
+//! A process killed while it creates a service leaves that service's static config locked
+//! (writable) forever; opening the stream must recover unless a live node may still be creating it.
+
+use std::fs::Permissions;
+use std::os::unix::fs::PermissionsExt;
+use std::path::PathBuf;
+
+use evgate_ipc::{
+    create_node, LatestPublisher, LatestSubscriber, PipelineNames, PipelineStats, Stream,
+};
+use iceoryx2::config::Config;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+
+/// Mode of a static config whose creator has not finished (iceoryx2 makes it read-only when done).
+const LOCKED: u32 = 0o600;
+const FINISHED: u32 = 0o400;
+
+fn unique_names(test: &str) -> PipelineNames {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos();
+    PipelineNames::new(&format!("ipc-{test}-{}-{nanos}", std::process::id()), "cam").unwrap()
+}
+
+/// Finds the static config of the publish-subscribe service `service` by its content, in the
+/// directory iceoryx2 reports, so the test does not share the path computation it checks.
+fn publish_subscribe_static_config(service: &str) -> PathBuf {
+    let directory = Config::global_config().global.service_dir().to_string();
+    let needle = format!("service_name = \"{service}\"");
+    std::fs::read_dir(&directory)
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .find(|path| {
+            std::fs::read_to_string(path).is_ok_and(|content| {
+                content.contains(&needle)
+                    && content.contains("[messaging_pattern.PublishSubscribe]")
+            })
+        })
+        .unwrap_or_else(|| panic!("no static config of {service} in {directory}"))
+}
+
+fn set_mode(path: &PathBuf, mode: u32) {
+    std::fs::set_permissions(path, Permissions::from_mode(mode)).unwrap();
+}
+
+#[test]
+fn a_stream_whose_creator_died_while_creating_it_is_created_afresh() {
+    let names = unique_names("stale-dead");
+    let service = names.service(Stream::Stats).unwrap();
+
+    // What a creator killed after writing the static config but before finishing it leaves:
+    // the same file, still writable, and no node that claims the service.
+    let (path, content) = {
+        let creator = create_node("ipc-test-stale-creator").unwrap();
+        let publisher =
+            LatestPublisher::<PipelineStats>::open(&creator, &names, Stream::Stats).unwrap();
+        let path = publish_subscribe_static_config(service.as_str());
+        let content = std::fs::read(&path).unwrap();
+        drop(publisher);
+        (path, content)
+    };
+    assert!(!path.exists(), "the last owner removes the service");
+    std::fs::write(&path, &content).unwrap();
+    set_mode(&path, LOCKED);
+
+    let node = create_node("ipc-test-stale-reader").unwrap();
+    let raw = node
+        .service_builder(&service)
+        .publish_subscribe::<PipelineStats>()
+        .open_or_create();
+    assert!(
+        matches!(
+            raw,
+            Err(
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::HangsInCreation
+                )
+            )
+        ),
+        "iceoryx2 alone must find the service stuck in creation, got {:?}",
+        raw.err()
+    );
+
+    let subscriber = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats).unwrap();
+    let publisher = LatestPublisher::<PipelineStats>::open(&node, &names, Stream::Stats).unwrap();
+    let stats = PipelineStats {
+        input_events: 42,
+        ..PipelineStats::default()
+    };
+    publisher.publish(stats).unwrap();
+    assert_eq!(
+        subscriber.latest().unwrap().map(|s| s.input_events),
+        Some(42)
+    );
+}
+
+#[test]
+fn a_stream_a_live_node_may_still_be_creating_is_left_alone() {
+    let names = unique_names("stale-live");
+    let creator = create_node("ipc-test-live-creator").unwrap();
+    let publisher =
+        LatestPublisher::<PipelineStats>::open(&creator, &names, Stream::Stats).unwrap();
+    let path = publish_subscribe_static_config(names.service(Stream::Stats).unwrap().as_str());
+    // Looks like a creation in progress by a node that is alive.
+    set_mode(&path, LOCKED);
+
+    let node = create_node("ipc-test-live-reader").unwrap();
+    let outcome = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats);
+    let still_there = path.exists();
+    set_mode(&path, FINISHED);
+    let error = outcome
+        .err()
+        .expect("opening a service in creation must fail");
+    assert!(
+        error.to_string().contains("HangsInCreation"),
+        "unexpected error: {error}"
+    );
+    assert!(
+        still_there,
+        "the static config of a live creator was removed"
+    );
+    drop(publisher);
+}
