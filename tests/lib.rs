@@ -2,16 +2,19 @@
 //! test executable), child processes that can never outlive a test, unique pipeline names and
 //! a bounded wait for everything that could hang.
 
-use std::io::Read;
+use std::cell::RefCell;
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::{Mutex, OnceLock};
+use std::process::{Child, ChildStderr, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::{Duration, Instant};
 
 use evgate_ipc::PipelineNames;
 
-/// Harness failures.
-#[derive(Debug, thiserror::Error)]
+/// Harness failures. Their `Debug` is their message, so `unwrap()` prints the children's report
+/// readably.
+#[derive(thiserror::Error)]
 pub enum HarnessError {
     #[error("cargo build -p {packages} failed ({status}); see its output above")]
     Build {
@@ -23,14 +26,27 @@ pub enum HarnessError {
         program: String,
         source: std::io::Error,
     },
-    #[error("{what} did not happen within {timeout:?}")]
-    Timeout { what: String, timeout: Duration },
-    #[error("{binary} printed no JSON summary ({reason}); stdout was: {stdout:?}")]
+    #[error("{what} did not happen within {timeout:?}{children}")]
+    Timeout {
+        what: String,
+        timeout: Duration,
+        /// [`children_report`] of the test that waited.
+        children: String,
+    },
+    #[error("{binary} printed no JSON summary ({reason}); stdout was: {stdout:?}{report}")]
     Summary {
         binary: String,
         reason: String,
         stdout: String,
+        /// The process's exit status and last stderr lines.
+        report: String,
     },
+}
+
+impl std::fmt::Debug for HarnessError {
+    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(self, formatter)
+    }
 }
 
 /// The workspace root (the parent of this package).
@@ -146,6 +162,7 @@ pub fn wait_until(
             return Err(HarnessError::Timeout {
                 what: what.to_owned(),
                 timeout,
+                children: children_report(),
             });
         }
         std::thread::sleep(Duration::from_millis(10));
@@ -153,15 +170,110 @@ pub fn wait_until(
     Ok(())
 }
 
+/// Stderr lines of a child kept for failure messages: enough for an error and its context.
+const STDERR_TAIL_LINES: usize = 40;
+
+/// The last stderr lines of a child; `closed` once the pipe reached its end.
+#[derive(Default)]
+struct StderrTail {
+    lines: VecDeque<String>,
+    closed: bool,
+}
+
+/// A child and what a failure message tells of it.
+struct Watched {
+    name: String,
+    child: Child,
+    status: Option<ExitStatus>,
+    stderr_tail: Arc<Mutex<StderrTail>>,
+}
+
+impl Watched {
+    fn try_status(&mut self) -> Option<ExitStatus> {
+        if self.status.is_none() {
+            self.status = self.child.try_wait().ok().flatten();
+        }
+        self.status
+    }
+
+    /// `--- name (pid N): state`, then its last stderr lines.
+    fn report(&mut self) -> String {
+        let state = match self.try_status() {
+            Some(status) => {
+                // The last lines of an exited child may still be in the pipe (or held open by a
+                // grandchild, hence the bound).
+                let deadline = Instant::now() + Duration::from_secs(1);
+                while !lock(&self.stderr_tail).closed && Instant::now() < deadline {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                format!("exited, {status}")
+            }
+            None => "still running".to_owned(),
+        };
+        let tail = lock(&self.stderr_tail);
+        let mut report = format!(
+            "\n--- {} (pid {}): {state}; last {} stderr lines:",
+            self.name,
+            self.child.id(),
+            tail.lines.len()
+        );
+        for line in tail.lines.iter() {
+            report.push_str("\n    ");
+            report.push_str(line);
+        }
+        report
+    }
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+thread_local! {
+    /// The children started by this thread, i.e. by one test: tests run in parallel threads and
+    /// a failure reports its own children only.
+    static STARTED_HERE: RefCell<Vec<Weak<Mutex<Watched>>>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Exit status (or "still running") and last stderr lines of every child this thread started
+/// and still holds, for failure messages.
+pub fn children_report() -> String {
+    STARTED_HERE.with(|started| {
+        started
+            .borrow()
+            .iter()
+            .filter_map(Weak::upgrade)
+            .map(|watched| lock(&watched).report())
+            .collect()
+    })
+}
+
+/// Echoes the child's stderr through `eprintln!` (shown with the output of the test that
+/// started it) and keeps its last lines.
+fn forward_stderr(name: String, stderr: ChildStderr, tail: Arc<Mutex<StderrTail>>) {
+    for line in BufReader::new(stderr).lines() {
+        let Ok(line) = line else { break };
+        eprintln!("[{name}] {line}");
+        let mut tail = lock(&tail);
+        if tail.lines.len() == STDERR_TAIL_LINES {
+            tail.lines.pop_front();
+        }
+        tail.lines.push_back(line);
+    }
+    lock(&tail).closed = true;
+}
+
 /// A child process that is killed when dropped, so a failing test leaves nothing running.
 pub struct Process {
     pub name: String,
-    child: Child,
-    status: Option<ExitStatus>,
+    watched: Arc<Mutex<Watched>>,
 }
 
 impl Process {
-    /// Starts `program` with `args`; stdout is captured (the JSON summary), stderr is shared.
+    /// Starts `program` with `args`; stdout is captured (the JSON summary), stderr is echoed and
+    /// its tail kept for failure messages.
     pub fn start(program: &Path, args: &[&str]) -> Result<Self, HarnessError> {
         let name = program
             .file_name()
@@ -171,31 +283,45 @@ impl Process {
         command
             .args(args)
             .stdin(Stdio::null())
-            .stdout(Stdio::piped());
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
         if std::env::var_os("RUST_LOG").is_none() {
             command.env("RUST_LOG", "warn,iceoryx2_bb_loggers=error");
         }
-        let child = command.spawn().map_err(|source| HarnessError::Spawn {
+        // An error's backtrace would push the error itself out of the kept stderr tail.
+        if std::env::var_os("RUST_LIB_BACKTRACE").is_none() {
+            command.env("RUST_LIB_BACKTRACE", "0");
+        }
+        let mut child = command.spawn().map_err(|source| HarnessError::Spawn {
             program: program.display().to_string(),
             source,
         })?;
-        Ok(Self {
-            name,
+        let stderr_tail = Arc::new(Mutex::new(StderrTail::default()));
+        if let Some(stderr) = child.stderr.take() {
+            let (name, tail) = (format!("{name} {}", child.id()), Arc::clone(&stderr_tail));
+            std::thread::spawn(move || forward_stderr(name, stderr, tail));
+        }
+        let watched = Arc::new(Mutex::new(Watched {
+            name: name.clone(),
             child,
             status: None,
-        })
+            stderr_tail,
+        }));
+        STARTED_HERE.with(|started| {
+            let mut started = started.borrow_mut();
+            started.retain(|watched| watched.strong_count() > 0);
+            started.push(Arc::downgrade(&watched));
+        });
+        Ok(Self { name, watched })
     }
 
     pub fn pid(&self) -> u32 {
-        self.child.id()
+        lock(&self.watched).child.id()
     }
 
     /// Exit status once the process ended.
     pub fn try_status(&mut self) -> Option<ExitStatus> {
-        if self.status.is_none() {
-            self.status = self.child.try_wait().ok().flatten();
-        }
-        self.status
+        lock(&self.watched).try_status()
     }
 
     pub fn is_running(&mut self) -> bool {
@@ -207,7 +333,7 @@ impl Process {
         if self.is_running() {
             // SAFETY: kill(2) on our own unreaped child.
             unsafe {
-                libc::kill(self.child.id() as libc::pid_t, signal);
+                libc::kill(self.pid() as libc::pid_t, signal);
             }
         }
     }
@@ -216,36 +342,36 @@ impl Process {
     pub fn wait(&mut self, timeout: Duration) -> Result<(ExitStatus, String), HarnessError> {
         let what = format!("exit of {} (pid {})", self.name, self.pid());
         wait_until(&what, timeout, || self.try_status().is_some())?;
+        let mut watched = lock(&self.watched);
         let mut stdout = String::new();
-        if let Some(pipe) = self.child.stdout.as_mut() {
+        if let Some(pipe) = watched.child.stdout.as_mut() {
             let _ = pipe.read_to_string(&mut stdout);
         }
-        Ok((self.status.expect("waited for it"), stdout))
+        Ok((watched.status.expect("waited for it"), stdout))
     }
 
     /// Waits for a successful exit and parses the JSON summary printed on stdout.
     pub fn summary(&mut self, timeout: Duration) -> Result<serde_json::Value, HarnessError> {
         let (status, stdout) = self.wait(timeout)?;
-        if !status.success() {
-            return Err(HarnessError::Summary {
-                binary: self.name.clone(),
-                reason: format!("exit status {status}"),
-                stdout,
-            });
-        }
-        serde_json::from_str(&stdout).map_err(|error| HarnessError::Summary {
+        let failure = |reason: String, stdout: String| HarnessError::Summary {
             binary: self.name.clone(),
-            reason: error.to_string(),
+            reason,
             stdout,
-        })
+            report: lock(&self.watched).report(),
+        };
+        if !status.success() {
+            return Err(failure(format!("exit status {status}"), stdout));
+        }
+        serde_json::from_str(&stdout).map_err(|error| failure(error.to_string(), stdout))
     }
 }
 
 impl Drop for Process {
     fn drop(&mut self) {
-        if self.is_running() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
+        let mut watched = lock(&self.watched);
+        if watched.try_status().is_none() {
+            let _ = watched.child.kill();
+            let _ = watched.child.wait();
         }
     }
 }
