@@ -1,8 +1,10 @@
 //! Creating the iceoryx2 node of a process.
 
+use iceoryx2::config::Config;
 use iceoryx2::prelude::{Node, NodeBuilder, NodeName};
 use tracing::{debug, info};
 
+use crate::stale_service::{remove_unfinished_dynamic_configs, StaleServiceError};
 use crate::Service;
 
 /// Node creation failures.
@@ -12,6 +14,8 @@ pub enum NodeError {
     InvalidName { name: String, reason: String },
     #[error("cannot create iceoryx2 node {name:?}: {reason}")]
     Create { name: String, reason: String },
+    #[error(transparent)]
+    StaleService(#[from] StaleServiceError),
 }
 
 /// Creates the node of this process and removes the shared-memory resources left by processes
@@ -22,6 +26,8 @@ pub fn create_node(name: &str) -> Result<Node<Service>, NodeError> {
         name: name.to_owned(),
         reason: format!("{error:?}"),
     })?;
+    // Node creation cleans dead nodes, which would wait forever on an empty unfinished one.
+    remove_unfinished_dynamic_configs(Config::global_config())?;
     let node = NodeBuilder::new()
         .name(&node_name)
         .create::<Service>()

@@ -139,8 +139,9 @@ fn open_or_recover<F, E: Debug>(
         Err(error) if hangs_in_creation(&error) => {
             // A dead creator that finished its static config but not the rest is removed by
             // dead-node cleanup, unless another process was cleaning that node when ours started.
-            node.try_cleanup_dead_nodes();
-            if !remove_orphaned_static_config(node, name, pattern)? {
+            let cleaned_dead_nodes = node.try_cleanup_dead_nodes().cleanups > 0;
+            let removed_static_config = remove_orphaned_static_config(node, name, pattern)?;
+            if !cleaned_dead_nodes && !removed_static_config {
                 return Err(service_error(name, pattern_name, error));
             }
             open_or_create()

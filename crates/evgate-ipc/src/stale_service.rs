@@ -1,4 +1,4 @@
-//! Removing a service whose creator died half-way through creating it.
+//! Removing what a process killed half-way through creating a service leaves behind.
 //!
 //! iceoryx2 0.10 creates a service by first writing its static config file with owner-only
 //! read-write permissions (its "locked" state), then its content, and only then makes it
@@ -13,11 +13,20 @@
 //! so a locked static config that no live node holds a tag for has a dead creator and can go.
 //! The paths follow iceoryx2 0.10's layout (`<root>/services/<prefix><hash><suffix>`,
 //! `<root>/nodes/<node id>/<prefix><hash><tag suffix>`), built from the node's own config.
+//!
+//! A creator killed one step later, while creating the service's dynamic config (a shared-memory
+//! object that stays write-only until initialised), leaves one that nobody may read. When it is
+//! empty, iceoryx2 0.10 waits for it to grow without any timeout, and it does so inside dead-node
+//! cleanup, which every node creation runs: every later process of the machine hangs at start.
+//! A creator initialises its dynamic config within microseconds, so one still unreadable after
+//! the creation timeout is abandoned; [`remove_unfinished_dynamic_configs`] removes it before
+//! the node is created.
 
 use std::fs::Metadata;
 use std::io::ErrorKind;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use iceoryx2::config::Config;
 use iceoryx2::node::{NodeState, NodeView};
@@ -32,7 +41,10 @@ use crate::Service;
 /// `INIT_PERMISSIONS`); a finished one is read-only.
 const LOCKED_STATIC_CONFIG_MODE: u32 = 0o600;
 
-/// Failures while looking for or removing an orphaned static config.
+/// Where POSIX shared-memory objects appear as files on Linux, iceoryx2's dynamic configs among them.
+const SHARED_MEMORY_DIR: &str = "/dev/shm";
+
+/// Failures while looking for or removing what a killed creator left.
 #[derive(Debug, thiserror::Error)]
 pub enum StaleServiceError {
     #[error("cannot inspect the static config {path} of service {service:?}: {source}")]
@@ -49,6 +61,18 @@ pub enum StaleServiceError {
     },
     #[error("cannot list the iceoryx2 nodes to find who creates service {service:?}: {reason}")]
     ListNodes { service: String, reason: String },
+    #[error(
+        "cannot inspect the shared-memory object {path} (an iceoryx2 dynamic config): {source}"
+    )]
+    InspectDynamicConfig {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot remove the abandoned iceoryx2 dynamic config {path}: {source}")]
+    RemoveDynamicConfig {
+        path: PathBuf,
+        source: std::io::Error,
+    },
 }
 
 /// Where iceoryx2 keeps the files of one service of one messaging pattern.
@@ -181,4 +205,85 @@ fn any_live_node_holds_tag(
         reason: format!("{error:?}"),
     })?;
     Ok(holds)
+}
+
+/// A dynamic config no one may read yet: its creator has not finished initialising it.
+fn is_unfinished_dynamic_config(metadata: &Metadata) -> bool {
+    metadata.is_file() && metadata.permissions().mode() & 0o444 == 0
+}
+
+fn changed_at(metadata: &Metadata) -> SystemTime {
+    UNIX_EPOCH + Duration::new(metadata.ctime().max(0) as u64, metadata.ctime_nsec() as u32)
+}
+
+/// Removes the dynamic configs (of `config`'s prefix and suffix) that are still unreadable once
+/// the creation timeout has passed since their last change, waiting out that timeout for young
+/// ones; returns how many it removed.
+pub fn remove_unfinished_dynamic_configs(config: &Config) -> Result<usize, StaleServiceError> {
+    let prefix = config.global.prefix.to_string();
+    let suffix = config
+        .global
+        .service
+        .dynamic_config_storage_suffix
+        .to_string();
+    let creation_timeout = config.global.creation_timeout;
+    let entries = match std::fs::read_dir(SHARED_MEMORY_DIR) {
+        Ok(entries) => entries,
+        Err(error) if error.kind() == ErrorKind::NotFound => return Ok(0),
+        Err(source) => {
+            return Err(StaleServiceError::InspectDynamicConfig {
+                path: PathBuf::from(SHARED_MEMORY_DIR),
+                source,
+            })
+        }
+    };
+    let mut removed = 0;
+    for entry in entries {
+        let entry = entry.map_err(|source| StaleServiceError::InspectDynamicConfig {
+            path: PathBuf::from(SHARED_MEMORY_DIR),
+            source,
+        })?;
+        let file_name = entry.file_name();
+        let name = file_name.to_string_lossy();
+        if !(name.starts_with(&prefix) && name.ends_with(&suffix)) {
+            continue;
+        }
+        let path = entry.path();
+        let inspect = |source| StaleServiceError::InspectDynamicConfig {
+            path: path.clone(),
+            source,
+        };
+        let Some(before) = unfinished_metadata(&path).map_err(inspect)? else {
+            continue;
+        };
+        let abandoned_at = changed_at(&before) + creation_timeout;
+        if let Ok(remaining) = abandoned_at.duration_since(SystemTime::now()) {
+            std::thread::sleep(remaining);
+        }
+        // Removed only if nothing happened to it meanwhile: a creator's progress changes ctime.
+        match unfinished_metadata(&path).map_err(inspect)? {
+            Some(now) if identity(&now) == identity(&before) => {}
+            _ => continue,
+        }
+        match std::fs::remove_file(&path) {
+            Ok(()) => removed += 1,
+            Err(error) if error.kind() == ErrorKind::NotFound => continue,
+            Err(source) => return Err(StaleServiceError::RemoveDynamicConfig { path, source }),
+        }
+        warn!(
+            path = %path.display(),
+            "removed an iceoryx2 dynamic config its creator never finished"
+        );
+    }
+    Ok(removed)
+}
+
+/// The metadata of `path` when it is an unfinished dynamic config; `None` when it is finished or gone.
+fn unfinished_metadata(path: &Path) -> std::io::Result<Option<Metadata>> {
+    match std::fs::symlink_metadata(path) {
+        Ok(metadata) if is_unfinished_dynamic_config(&metadata) => Ok(Some(metadata)),
+        Ok(_) => Ok(None),
+        Err(error) if error.kind() == ErrorKind::NotFound => Ok(None),
+        Err(error) => Err(error),
+    }
 }

@@ -5,6 +5,7 @@ use std::fs::Permissions;
 use std::os::unix::fs::PermissionsExt;
 use std::path::PathBuf;
 
+use evgate_ipc::stale_service::remove_unfinished_dynamic_configs;
 use evgate_ipc::{
     create_node, LatestPublisher, LatestSubscriber, PipelineNames, PipelineStats, Stream,
 };
@@ -123,4 +124,38 @@ fn a_stream_a_live_node_may_still_be_creating_is_left_alone() {
         "the static config of a live creator was removed"
     );
     drop(publisher);
+}
+
+/// A shared-memory object named like an iceoryx2 dynamic config of this test.
+fn dynamic_config_path(test: &str) -> PathBuf {
+    let global = &Config::global_config().global;
+    PathBuf::from("/dev/shm").join(format!(
+        "{}evgate-test-{test}-{}{}",
+        global.prefix,
+        std::process::id(),
+        global.service.dynamic_config_storage_suffix
+    ))
+}
+
+#[test]
+fn an_empty_dynamic_config_nobody_may_read_is_removed_once_the_creation_timeout_passed() {
+    // What a creator killed between creating its dynamic config and sizing it leaves; iceoryx2
+    // 0.10 would wait for it to grow forever when cleaning up that creator's node.
+    let abandoned = dynamic_config_path("abandoned");
+    std::fs::write(&abandoned, b"").unwrap();
+    set_mode(&abandoned, 0o200);
+    let finished = dynamic_config_path("finished");
+    std::fs::write(&finished, b"").unwrap();
+    set_mode(&finished, 0o600);
+
+    // Node creations of the other tests of this binary may remove it first.
+    remove_unfinished_dynamic_configs(Config::global_config()).unwrap();
+    let finished_kept = finished.exists();
+    std::fs::remove_file(&finished).unwrap();
+    assert!(
+        !abandoned.exists(),
+        "{} is still there",
+        abandoned.display()
+    );
+    assert!(finished_kept, "a readable dynamic config was removed");
 }
