@@ -61,15 +61,8 @@ pub enum StaleServiceError {
     },
     #[error("cannot list the iceoryx2 nodes to find who creates service {service:?}: {reason}")]
     ListNodes { service: String, reason: String },
-    #[error(
-        "cannot inspect the shared-memory object {path} (an iceoryx2 dynamic config): {source}"
-    )]
-    InspectDynamicConfig {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("cannot remove the abandoned iceoryx2 dynamic config {path}: {source}")]
-    RemoveDynamicConfig {
+    #[error("cannot list {path}, where iceoryx2 keeps its dynamic configs: {source}")]
+    ListSharedMemory {
         path: PathBuf,
         source: std::io::Error,
     },
@@ -231,51 +224,68 @@ pub fn remove_unfinished_dynamic_configs(config: &Config) -> Result<usize, Stale
         Ok(entries) => entries,
         Err(error) if error.kind() == ErrorKind::NotFound => return Ok(0),
         Err(source) => {
-            return Err(StaleServiceError::InspectDynamicConfig {
+            return Err(StaleServiceError::ListSharedMemory {
                 path: PathBuf::from(SHARED_MEMORY_DIR),
                 source,
             })
         }
     };
     let mut removed = 0;
-    for entry in entries {
-        let entry = entry.map_err(|source| StaleServiceError::InspectDynamicConfig {
-            path: PathBuf::from(SHARED_MEMORY_DIR),
-            source,
-        })?;
+    // Entries that vanish or cannot be read are left to their owners: failing here would stop
+    // every evgate process from starting over a file that may not even be ours.
+    for entry in entries.flatten() {
         let file_name = entry.file_name();
         let name = file_name.to_string_lossy();
         if !(name.starts_with(&prefix) && name.ends_with(&suffix)) {
             continue;
         }
         let path = entry.path();
-        let inspect = |source| StaleServiceError::InspectDynamicConfig {
-            path: path.clone(),
-            source,
-        };
-        let Some(before) = unfinished_metadata(&path).map_err(inspect)? else {
+        let Ok(Some(before)) = unfinished_metadata(&path) else {
             continue;
         };
-        let abandoned_at = changed_at(&before) + creation_timeout;
-        if let Ok(remaining) = abandoned_at.duration_since(SystemTime::now()) {
-            std::thread::sleep(remaining);
-        }
-        // Removed only if nothing happened to it meanwhile: a creator's progress changes ctime.
-        match unfinished_metadata(&path).map_err(inspect)? {
-            Some(now) if identity(&now) == identity(&before) => {}
-            _ => continue,
+        let deadline = changed_at(&before) + creation_timeout;
+        if !matches!(stays_unfinished_until(&path, &before, deadline), Ok(true)) {
+            continue;
         }
         match std::fs::remove_file(&path) {
-            Ok(()) => removed += 1,
-            Err(error) if error.kind() == ErrorKind::NotFound => continue,
-            Err(source) => return Err(StaleServiceError::RemoveDynamicConfig { path, source }),
+            Ok(()) => {
+                removed += 1;
+                warn!(
+                    path = %path.display(),
+                    "removed an iceoryx2 dynamic config its creator never finished"
+                );
+            }
+            Err(error) if error.kind() == ErrorKind::NotFound => {}
+            Err(error) => warn!(
+                path = %path.display(),
+                %error,
+                "cannot remove an iceoryx2 dynamic config its creator never finished; \
+                 dead-node cleanup may wait on it"
+            ),
         }
-        warn!(
-            path = %path.display(),
-            "removed an iceoryx2 dynamic config its creator never finished"
-        );
     }
     Ok(removed)
+}
+
+/// Whether the unfinished dynamic config `path` (as `before` describes it) is still the same
+/// unfinished file at `deadline`; polls so that a live creator's progress ends the wait at once.
+fn stays_unfinished_until(
+    path: &Path,
+    before: &Metadata,
+    deadline: SystemTime,
+) -> std::io::Result<bool> {
+    const POLL: Duration = Duration::from_millis(10);
+    loop {
+        // A creator's progress (size, permissions) changes ctime, so the identity tells it.
+        match unfinished_metadata(path)? {
+            Some(now) if identity(&now) == identity(before) => {}
+            _ => return Ok(false),
+        }
+        match deadline.duration_since(SystemTime::now()) {
+            Ok(remaining) => std::thread::sleep(remaining.min(POLL)),
+            Err(_) => return Ok(true),
+        }
+    }
 }
 
 /// The metadata of `path` when it is an unfinished dynamic config; `None` when it is finished or gone.
