@@ -11,7 +11,9 @@
 # with torch, numpy, scipy and tqdm. Reassemble the weights with `cat OUT/weights.pt.part-* >
 # weights.pt`; `evgate_train.export` and `evaluate` read the file like any checkpoint.
 # Overrides (environment): DEVICE (cuda), SEQUENCES_PER_PRESET (6: the suite-v4 train seeds
-# 10p000-10p001 and 10p002 onwards), BATCH (16), CHUNK_WINDOWS (6), LOADER_WORKERS (cores - 4).
+# 10p000-10p001 and 10p002 onwards), BATCH (16), CHUNK_WINDOWS (6), LOADER_WORKERS (cores - 4),
+# INIT_FROM (continue from these weights with a fresh optimiser), LR (1e-3), WARMUP (100),
+# RESERVE_S (75: saving and timing), LATENCY (1; 0 skips the CUDA timing).
 set -euo pipefail
 
 out=${1:?usage: lease-train.sh OUT SECONDS [SIZE]}
@@ -66,14 +68,14 @@ cd "$root/models/training"
 "$python" -m evgate_train.manifest --data "$data" --output "$out/manifest.json"
 sha256sum "$out/manifest.json"
 
-reserve_s=75
+reserve_s=${RESERVE_S:-75}
 train_s=$((budget_s - $(elapsed) - reserve_s))
 echo "training $size on $device for $train_s s (loading included) from $(elapsed) s"
 status=0
 "$python" -m evgate_train.train --data "$data" --manifest "$out/manifest.json" --run-dir "$run" \
     --size "$size" --device "$device" --loader-workers "$workers" --threads 4 \
     --batch "${BATCH:-16}" --chunk-windows "${CHUNK_WINDOWS:-6}" --crop 160 --steps 100000 \
-    --time-budget-s "$train_s" --lr 1e-3 --warmup 100 --positive-weight 3 --dice-weight 1 \
+    --time-budget-s "$train_s" --lr "${LR:-1e-3}" --warmup "${WARMUP:-100}" ${INIT_FROM:+--init-from "$INIT_FROM"} --positive-weight 3 --dice-weight 1 \
     --flow-target arrival --flow-weight 0.2 --contrast-last-window-only --checkpoint-every 500 \
     --seed 7 >"$run/train.out" 2>&1 || status=$?
 tr '\r' '\n' <"$run/train.out" | grep -v '^\s*$' | tail -n 8
@@ -97,7 +99,7 @@ EOF
 sha256sum "$run/weights.pt"
 split -b 15M -d "$run/weights.pt" "$out/weights.pt.part-"
 
-if [[ $device == cuda ]]; then
+if [[ $device == cuda && ${LATENCY:-1} != 0 ]]; then
     "$python" -m evgate_train.torch_latency --checkpoint "$run/weights.pt" --device cuda \
         --inputs 346x260,640x480 --horizons 1,8 --output "$out/latency-cuda-tf32.json" >/dev/null
     "$python" -m evgate_train.torch_latency --checkpoint "$run/weights.pt" --device cuda --no-tf32 \
