@@ -26,10 +26,13 @@ class WindowBatch:
     future_flow: torch.Tensor  # [B, K, 2, S, S]
     flow_valid: torch.Tensor  # [B, K, S, S]
     future_events: list[list[FutureEvents]]  # [B][K]
+    # The horizons stay readable on the host after `to`: the objective decides from them which
+    # pairs enter contrast maximisation without waiting for the device.
+    host_horizons_ms: np.ndarray  # [B, K] float32
 
     def to(self, device: torch.device | str) -> "WindowBatch":
-        """The tensors on `device`; the future events stay numpy arrays (the objective moves
-        them per sample, as their counts differ)."""
+        """The tensors on `device`; the future events stay numpy arrays (the objective
+        concatenates the qualifying ones and moves them at once)."""
         return dataclasses.replace(
             self,
             **{
@@ -53,6 +56,7 @@ def collate(windows: list) -> WindowBatch:
         future_flow=stack("future_flow"),
         flow_valid=stack("flow_valid"),
         future_events=[w.future_events for w in windows],
+        host_horizons_ms=np.stack([w.horizons_ms for w in windows]),
     )
 
 

@@ -3,10 +3,11 @@ unsupervised contrast-maximisation term (paper, appendix: L = w_sup L_sup + w_un
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from .batches import WindowBatch
-from .contrast_maximisation import average_timestamp_loss
+from .contrast_maximisation import batched_average_timestamp_loss
 from .losses import bce_dice, charbonnier_smoothness, flow_l1
 from .network import NetworkOutput
 
@@ -43,24 +44,7 @@ def window_objective(
     flow = out.future_flow.flatten(0, 1)
     flow_error = flow_l1(flow, batch.future_flow.flatten(0, 1), batch.flow_valid.flatten(0, 1))
     smoothness = charbonnier_smoothness(flow)
-    contrast_terms = []
-    for sample, events_per_horizon in enumerate(batch.future_events if with_contrast else []):
-        for k, events in enumerate(events_per_horizon):
-            horizon = float(batch.horizons_ms[sample, k])
-            if horizon < weights.contrast_min_horizon_ms or len(events.x) < weights.contrast_min_events:
-                continue
-            device = out.velocity.device
-            contrast_terms.append(
-                average_timestamp_loss(
-                    torch.from_numpy(events.x).to(device),
-                    torch.from_numpy(events.y).to(device),
-                    torch.from_numpy(events.t_ms).to(device),
-                    torch.from_numpy(events.on).to(device),
-                    out.velocity[sample, k],
-                    horizon,
-                )
-            )
-    contrast = torch.stack(contrast_terms).mean() if contrast_terms else flow.new_zeros(())
+    contrast = contrast_term(out.velocity, batch, weights) if with_contrast else flow.new_zeros(())
     total = (
         current
         + weights.future_mask * future
@@ -81,3 +65,42 @@ def window_objective(
         "smoothness": smoothness,
         "contrast": contrast,
     }
+
+
+def contrast_term(velocity: torch.Tensor, batch: WindowBatch, weights: LossWeights) -> torch.Tensor:
+    """Mean contrast-maximisation loss over the (sample, horizon) pairs whose horizon and event
+    count are long enough; zero without any. Which pairs qualify is decided from the host copies
+    of the horizons and events, so the device is never waited on; the events of all qualifying
+    pairs travel to the device in one array, asynchronously (a blocking copy would wait for
+    the forward pass queued before it)."""
+    samples, horizons = batch.host_horizons_ms.shape
+    pairs = [
+        (sample, k)
+        for sample in range(samples)
+        for k in range(horizons)
+        if batch.host_horizons_ms[sample, k] >= weights.contrast_min_horizon_ms
+        and len(batch.future_events[sample][k].x) >= weights.contrast_min_events
+    ]
+    if not pairs:
+        return velocity.new_zeros(())
+    events = [batch.future_events[sample][k] for sample, k in pairs]
+    # Rows x, y, t_ms, on, window index: float32 holds the small integers exactly.
+    packed = np.concatenate(
+        [
+            np.stack([e.x, e.y, e.t_ms, e.on, np.full(len(e.x), window)]).astype(np.float32)
+            for window, e in enumerate(events)
+        ],
+        axis=1,
+    )
+    x, y, t_ms, on, window = torch.from_numpy(packed).to(velocity.device, non_blocking=True)
+    selected = torch.tensor([sample * horizons + k for sample, k in pairs]).to(velocity.device, non_blocking=True)
+    losses = batched_average_timestamp_loss(
+        x,
+        y,
+        t_ms,
+        on > 0.5,
+        window.long(),
+        velocity.flatten(0, 1)[selected],
+        batch.horizons_ms.to(velocity.dtype).flatten()[selected],
+    )
+    return losses.mean()
