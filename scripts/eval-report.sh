@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The README's headline report: `evgate eval` on the test split of the simulator's suite with
-# the committed model, plus every model in models/ablation (ATC variants and sizes for tables
-# VI and VII) when that folder holds any. Writes JSON, Markdown tables and plots into the report
+# the committed models (S, the model under test, then L when present), plus every model in
+# models/ablation (ATC variants and sizes for tables VI and VII) when that folder holds any. Writes JSON, Markdown tables and plots into the report
 # folder. Environment: EVGATE_SUITE (default data/suite-v4), EVGATE_REPORT (default
 # reports/test-v4); further arguments go to `evgate eval` (e.g. --threads 4, --max-seconds 2).
 set -euo pipefail
@@ -15,6 +15,9 @@ fi
 bash scripts/fetch-onnxruntime.sh
 cargo build --release -p evgate
 args=(--suite "$suite" --split test --report "$report" --model models/evgate-S.onnx)
+if [ -f models/evgate-L.onnx ]; then
+  args+=(--model models/evgate-L.onnx)
+fi
 if compgen -G "models/ablation/*.onnx" > /dev/null; then
   args+=(--ablation-models models/ablation)
 fi
