@@ -97,27 +97,26 @@ def batched_average_timestamp_loss(
     # One image per (reference, window, polarity), laid out in that order.
     reference = torch.arange(2, device=x.device).view(2, 1)
     image = ((reference * windows + segment) * 2 + (~on).long()) * pixels  # [2, E]
-    x0, y0 = torch.floor(warped_x), torch.floor(warped_y)
-    indices, kernels = [], []
-    for dx in (0.0, 1.0):
-        for dy in (0.0, 1.0):
-            cx, cy = x0 + dx, y0 + dy
-            kernel = (1.0 - (warped_x - cx).abs()) * (1.0 - (warped_y - cy).abs())
-            inside = (cx >= 0) & (cx <= width - 1) & (cy >= 0) & (cy <= height - 1)
-            indices.append(image + (cy.clamp(0, height - 1) * width + cx.clamp(0, width - 1)).long())
-            kernels.append(kernel * inside.to(kernel.dtype))
-    index = torch.stack(indices)  # [4 corners, 2 references, E]
-    weight = torch.stack(kernels)
+    # The four bilinear corners as a leading axis, [4, 2, E]; offsets made on the device, as a
+    # tensor from a Python list would be a blocking host-to-device copy.
+    corner = torch.arange(4, device=x.device, dtype=x.dtype).view(4, 1, 1)
+    corner_x = torch.floor(warped_x) + corner % 2
+    corner_y = torch.floor(warped_y) + torch.div(corner, 2, rounding_mode="floor")
+    kernel = (1.0 - (warped_x - corner_x).abs()) * (1.0 - (warped_y - corner_y).abs())
+    inside = (corner_x >= 0) & (corner_x <= width - 1) & (corner_y >= 0) & (corner_y <= height - 1)
+    index = image + (corner_y.clamp(0, height - 1) * width + corner_x.clamp(0, width - 1)).long()
+    weight = kernel * inside.to(kernel.dtype)
     images = 2 * windows * 2 * pixels
     # Event counts in the first `images` entries, timestamp sums in the next: one 1-D index_add
-    # (the CPU index_add over rows of a 2-D image runs one tensor operation per index).
+    # (the CPU index_add over rows of a 2-D image runs one tensor operation per index; scatter_add
+    # splats faster on CPU but its backward, a gather, costs more than it saves).
     splat = weight.new_zeros(2 * images).index_add(
         0,
         torch.cat([index.reshape(-1), (index + images).reshape(-1)]),
         torch.cat([weight.reshape(-1), (weight * timestamp).reshape(-1)]),
     )
-    counts = splat[:images].view(2, windows, 2, pixels)
-    stamps = splat[images:].view(2, windows, 2, pixels)
+    # unbind, not slicing: each slice's backward would fill a zero gradient of the whole splat.
+    counts, stamps = splat.view(2, 2, windows, 2, pixels).unbind(0)
     average = stamps / (counts + 1e-9)
     loss = (average**2).sum(dim=(2, 3))  # [2, N]
     hit = (counts.sum(dim=2) > 0).sum(dim=2).to(x.dtype)

@@ -30,8 +30,7 @@ class LossWeights:
 def window_objective(
     out: NetworkOutput, batch: WindowBatch, weights: LossWeights, with_contrast: bool = True
 ) -> dict[str, torch.Tensor]:
-    """`with_contrast=False` skips the contrast-maximisation term, which costs on CPU about
-    twice the rest of a window's forward and backward pass."""
+    """`with_contrast=False` skips the contrast-maximisation term (`contrast_term`)."""
     valid = batch.mask_valid.view(-1, 1, 1, 1).expand_as(batch.mask)
     current = bce_dice(out.mask_logits, batch.mask, valid, weights.dice, weights.positive)
     future = bce_dice(
@@ -71,8 +70,7 @@ def contrast_term(velocity: torch.Tensor, batch: WindowBatch, weights: LossWeigh
     """Mean contrast-maximisation loss over the (sample, horizon) pairs whose horizon and event
     count are long enough; zero without any. Which pairs qualify is decided from the host copies
     of the horizons and events, so the device is never waited on; the events of all qualifying
-    pairs travel to the device in one array, asynchronously (a blocking copy would wait for
-    the forward pass queued before it)."""
+    pairs travel to the device in one array."""
     samples, horizons = batch.host_horizons_ms.shape
     pairs = [
         (sample, k)
@@ -92,8 +90,8 @@ def contrast_term(velocity: torch.Tensor, batch: WindowBatch, weights: LossWeigh
         ],
         axis=1,
     )
-    x, y, t_ms, on, window = torch.from_numpy(packed).to(velocity.device, non_blocking=True)
-    selected = torch.tensor([sample * horizons + k for sample, k in pairs]).to(velocity.device, non_blocking=True)
+    x, y, t_ms, on, window = _to_device(torch.from_numpy(packed), velocity.device)
+    selected = _to_device(torch.tensor([sample * horizons + k for sample, k in pairs]), velocity.device)
     losses = batched_average_timestamp_loss(
         x,
         y,
@@ -104,3 +102,11 @@ def contrast_term(velocity: torch.Tensor, batch: WindowBatch, weights: LossWeigh
         batch.horizons_ms.to(velocity.dtype).flatten()[selected],
     )
     return losses.mean()
+
+
+def _to_device(host: torch.Tensor, device: torch.device) -> torch.Tensor:
+    """An asynchronous copy: a blocking one would wait for the forward pass queued before it.
+    Only page-locked memory is copied asynchronously to a GPU."""
+    if device.type == "cuda":
+        host = host.pin_memory()
+    return host.to(device, non_blocking=True)
