@@ -19,6 +19,8 @@ import onnx
 import onnxruntime
 from tqdm import tqdm
 
+from .timings import timing_summary
+
 
 def measure(session: onnxruntime.InferenceSession, shapes: dict, horizons: int, runs: int, warmup: int) -> dict:
     rng = np.random.default_rng(0)
@@ -34,14 +36,7 @@ def measure(session: onnxruntime.InferenceSession, shapes: dict, horizons: int, 
         states = {f"state_{i}": outputs[3 + i] for i in range(4)}
         if run >= warmup:
             timings.append(elapsed * 1000.0)
-    values = np.array(timings)
-    return {
-        "horizons": horizons,
-        "runs": runs,
-        "median_ms": round(float(np.median(values)), 3),
-        "p90_ms": round(float(np.percentile(values, 90)), 3),
-        "mean_ms": round(float(values.mean()), 3),
-    }
+    return {"horizons": horizons, **timing_summary(timings)}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,10 +17,10 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from .checkpoint import load_checkpoint
+from .timings import timing_summary
 from .network import SuppressionNetwork
 from .voxel import padded
 
@@ -60,15 +60,7 @@ def measure(network: SuppressionNetwork, device: torch.device, width: int, heigh
         states = out.states
         if run >= warmup:
             timings.append(elapsed * 1000.0)
-    values = np.array(timings)
-    return {
-        "input": f"{width}x{height}",
-        "horizons": horizons,
-        "runs": runs,
-        "median_ms": round(float(np.median(values)), 3),
-        "p90_ms": round(float(np.percentile(values, 90)), 3),
-        "mean_ms": round(float(values.mean()), 3),
-    }
+    return {"input": f"{width}x{height}", "horizons": horizons, **timing_summary(timings)}
 
 
 def main(argv: list[str] | None = None) -> int:
