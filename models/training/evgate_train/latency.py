@@ -7,7 +7,6 @@ start then the returned states fed back, as a stream does. Reports median, p90 a
 """
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -19,7 +18,7 @@ import onnx
 import onnxruntime
 from tqdm import tqdm
 
-from .timings import timing_summary
+from .timings import print_and_save, timing_summary
 
 
 def measure(session: onnxruntime.InferenceSession, shapes: dict, horizons: int, runs: int, warmup: int) -> dict:
@@ -65,10 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         "load_average": os.getloadavg(),
         "results": [measure(session, shapes, int(k), args.runs, args.warmup) for k in args.horizons.split(",")],
     }
-    print(json.dumps(result, indent=2))
-    if args.output:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-        args.output.write_text(json.dumps(result, indent=2))
+    print_and_save(result, args.output)
     return 0
 
 

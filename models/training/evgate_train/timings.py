@@ -1,4 +1,7 @@
-"""The summary both latency tools report for a list of per-window times."""
+"""What both latency tools report: the summary of per-window times, printed and saved as JSON."""
+
+import json
+from pathlib import Path
 
 import numpy as np
 
@@ -11,3 +14,10 @@ def timing_summary(timings_ms: list[float]) -> dict:
         "p90_ms": round(float(np.percentile(values, 90)), 3),
         "mean_ms": round(float(values.mean()), 3),
     }
+
+
+def print_and_save(result: dict, output: Path | None) -> None:
+    print(json.dumps(result, indent=2))
+    if output:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        output.write_text(json.dumps(result, indent=2))

@@ -11,7 +11,6 @@ size and K.
 """
 
 import argparse
-import json
 import platform
 import sys
 import time
@@ -20,7 +19,7 @@ from pathlib import Path
 import torch
 
 from .checkpoint import load_checkpoint
-from .timings import timing_summary
+from .timings import print_and_save, timing_summary
 from .network import SuppressionNetwork
 from .voxel import padded
 
@@ -97,10 +96,7 @@ def main(argv: list[str] | None = None) -> int:
             for k in args.horizons.split(",")
         ],
     }
-    print(json.dumps(result, indent=2))
-    if args.output:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-        args.output.write_text(json.dumps(result, indent=2))
+    print_and_save(result, args.output)
     return 0
 
 
