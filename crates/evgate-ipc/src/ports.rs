@@ -174,12 +174,25 @@ fn open_wakeup_service(
     )
 }
 
-fn publish_subscribe_hangs_in_creation(error: &PublishSubscribeOpenOrCreateError) -> bool {
-    matches!(
-        error,
-        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-            PublishSubscribeOpenError::HangsInCreation
-        )
+/// `open_or_recover` for a publish-subscribe service.
+fn open_or_recover_publish_subscribe<F>(
+    node: &Node<Service>,
+    name: &ServiceName,
+    open_or_create: impl Fn() -> Result<F, PublishSubscribeOpenOrCreateError>,
+) -> Result<F, PortError> {
+    open_or_recover(
+        node,
+        name,
+        MessagingPattern::PublishSubscribe,
+        |error| {
+            matches!(
+                error,
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::HangsInCreation
+                )
+            )
+        },
+        open_or_create,
     )
 }
 
@@ -280,19 +293,13 @@ where
     T: Debug + ZeroCopySend + 'static,
     H: Debug + ZeroCopySend + 'static,
 {
-    open_or_recover(
-        node,
-        name,
-        MessagingPattern::PublishSubscribe,
-        publish_subscribe_hangs_in_creation,
-        || {
-            let builder = node
-                .service_builder(name)
-                .publish_subscribe::<[T]>()
-                .user_header::<H>();
-            with_service_limits(builder, wants_latest(stream)).open_or_create()
-        },
-    )
+    open_or_recover_publish_subscribe(node, name, || {
+        let builder = node
+            .service_builder(name)
+            .publish_subscribe::<[T]>()
+            .user_header::<H>();
+        with_service_limits(builder, wants_latest(stream)).open_or_create()
+    })
 }
 
 impl<T, H> SlicePublisher<T, H>
@@ -507,16 +514,10 @@ fn open_value_service<T>(
 where
     T: Debug + ZeroCopySend + 'static,
 {
-    open_or_recover(
-        node,
-        name,
-        MessagingPattern::PublishSubscribe,
-        publish_subscribe_hangs_in_creation,
-        || {
-            with_service_limits(node.service_builder(name).publish_subscribe::<T>(), true)
-                .open_or_create()
-        },
-    )
+    open_or_recover_publish_subscribe(node, name, || {
+        with_service_limits(node.service_builder(name).publish_subscribe::<T>(), true)
+            .open_or_create()
+    })
 }
 
 /// Publishes a fixed-size value whose newest copy is all readers need (the stats).
