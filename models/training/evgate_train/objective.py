@@ -10,6 +10,11 @@ from .batches import WindowBatch
 from .contrast_maximisation import batched_average_timestamp_loss
 from .losses import bce_dice, charbonnier_smoothness, flow_l1
 from .network import NetworkOutput
+from .warp import backward_warp
+
+# The warped true mask is a probability; it is kept this far from 0 and 1 so that its logit,
+# which the BCE + Dice loss takes, stays finite.
+TRUE_MASK_MARGIN = 0.02
 
 
 @dataclass(frozen=True)
@@ -22,6 +27,9 @@ class LossWeights:
     flow: float = 0.1
     smoothness: float = 0.05
     contrast: float = 1.0
+    # The true mask at t warped by the predicted flow against the true mask at t + h: a flow
+    # signal that does not depend on how good the predicted current mask is.
+    true_mask_warp: float = 0.0
     # Below this horizon or event count the future window is too short to show motion blur.
     contrast_min_horizon_ms: float = 10.0
     contrast_min_events: int = 50
@@ -43,6 +51,9 @@ def window_objective(
     flow = out.future_flow.flatten(0, 1)
     flow_error = flow_l1(flow, batch.future_flow.flatten(0, 1), batch.flow_valid.flatten(0, 1))
     smoothness = charbonnier_smoothness(flow)
+    true_mask_warp = (
+        true_mask_warp_term(flow, batch, weights) if weights.true_mask_warp > 0 else flow.new_zeros(())
+    )
     contrast = contrast_term(out.velocity, batch, weights) if with_contrast else flow.new_zeros(())
     total = (
         current
@@ -50,6 +61,7 @@ def window_objective(
         + weights.flow * flow_error
         + weights.smoothness * smoothness
         + weights.contrast * contrast
+        + weights.true_mask_warp * true_mask_warp
     )
     with torch.no_grad():
         predicted, truth = out.mask_logits > 0, batch.mask > 0.5
@@ -63,7 +75,21 @@ def window_objective(
         "flow_l1": flow_error,
         "smoothness": smoothness,
         "contrast": contrast,
+        "true_mask_warp": true_mask_warp,
     }
+
+
+def true_mask_warp_term(flow: torch.Tensor, batch: WindowBatch, weights: LossWeights) -> torch.Tensor:
+    """BCE + Dice of the true current mask backward-warped by `flow` [B*K, 2, H, W] against the
+    true future mask, over the windows whose current mask is known. The mask is warped as a
+    probability, so what enters from outside the image is background."""
+    horizons = batch.future_mask.shape[1]
+    per_horizon = batch.mask.unsqueeze(1).expand(-1, horizons, -1, -1, -1).flatten(0, 1)
+    warped = backward_warp(per_horizon, flow).view_as(batch.future_mask)
+    warped = TRUE_MASK_MARGIN + (1.0 - 2.0 * TRUE_MASK_MARGIN) * warped
+    warped = torch.log(warped / (1.0 - warped))
+    valid = batch.mask_valid.view(-1, 1, 1, 1).expand_as(batch.future_mask)
+    return bce_dice(warped, batch.future_mask, valid, weights.dice, weights.positive)
 
 
 def contrast_term(velocity: torch.Tensor, batch: WindowBatch, weights: LossWeights) -> torch.Tensor:

@@ -62,6 +62,7 @@ def forecast_ramped(weights: LossWeights, step: int, ramp_steps: int) -> LossWei
         flow=weights.flow * scale,
         smoothness=weights.smoothness * scale,
         contrast=weights.contrast * scale,
+        true_mask_warp=weights.true_mask_warp * scale,
     )
 
 
@@ -93,6 +94,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--flow-weight", type=float, default=0.1, help="flow L1 weight")
     parser.add_argument("--smoothness-weight", type=float, default=0.05, help="Charbonnier smoothness weight")
     parser.add_argument("--contrast-weight", type=float, default=1.0, help="contrast-maximisation weight")
+    parser.add_argument(
+        "--true-mask-warp-weight",
+        type=float,
+        default=0.0,
+        help="weight of the true current mask warped by the predicted flow against the true future "
+        "mask (0 disables)",
+    )
     parser.add_argument("--max-contrast-events", type=int, default=4000, help="events per future window for CM")
     parser.add_argument(
         "--contrast-last-window-only",
@@ -227,6 +235,7 @@ def train(args: argparse.Namespace) -> Path:
         flow=args.flow_weight,
         smoothness=args.smoothness_weight,
         contrast=args.contrast_weight,
+        true_mask_warp=args.true_mask_warp_weight,
     )
     network.to(device)
     optimiser = torch.optim.AdamW(network.parameters(), lr=args.lr, weight_decay=args.weight_decay)
