@@ -8,6 +8,8 @@ import torch
 
 from .network import NetworkConfig, SuppressionNetwork
 
+TIME_CONDITIONING_PREFIX = "time_conditioning."
+
 
 class CheckpointError(ValueError):
     """A checkpoint file that cannot be read or lacks a field."""
@@ -57,3 +59,20 @@ def load_checkpoint(path: Path) -> Checkpoint:
         optimiser_state=payload.get("optimiser"),
         train_config=payload.get("train_config", {}),
     )
+
+
+def with_time_conditioning(network: SuppressionNetwork, variant: str) -> SuppressionNetwork:
+    """A network of another time-conditioning variant holding every weight of `network` that the
+    variant shares: the rows of an ablation that start from one trained network. Weights the
+    variant adds are freshly initialised; only time-conditioning weights may differ."""
+    config = dataclasses.replace(network.config, time_conditioning=variant)
+    variant_network = SuppressionNetwork(config)
+    source = network.state_dict()
+    target = variant_network.state_dict()
+    shared = {name: weight for name, weight in source.items() if name in target and target[name].shape == weight.shape}
+    differing = (set(source) | set(target)) - set(shared)
+    outside = sorted(name for name in differing if not name.startswith(TIME_CONDITIONING_PREFIX))
+    if outside:
+        raise CheckpointError(f"time-conditioning variant {variant!r} differs outside time conditioning: {outside[:3]}")
+    variant_network.load_state_dict(shared, strict=False)
+    return variant_network

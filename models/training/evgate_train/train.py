@@ -25,11 +25,12 @@ import torch
 from tqdm import tqdm
 
 from .batches import ChunkSampler
-from .checkpoint import load_checkpoint, save_checkpoint
+from .checkpoint import load_checkpoint, save_checkpoint, with_time_conditioning
 from .loader import chunk_batches
 from .network import NetworkConfig, SuppressionNetwork, check_input_size
 from .objective import LossWeights, window_objective
 from .sequence import load_sequence
+from .time_conditioning import VARIANTS
 
 log = logging.getLogger("evgate_train.train")
 
@@ -170,6 +171,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="start from this checkpoint's weights (fine-tuning on other data): a fresh optimiser and "
         "schedule, step 0, this run's manifest; the network configuration comes from the checkpoint",
     )
+    parser.add_argument(
+        "--init-time-conditioning",
+        choices=VARIANTS,
+        help="with --init-from: switch the network to this time-conditioning variant, keeping every "
+        "weight it shares with the checkpoint (ablation rows fine-tuned from one trained network)",
+    )
     return parser
 
 
@@ -205,6 +212,8 @@ def train(args: argparse.Namespace) -> Path:
         log.info("resuming %s at step %d", checkpoint_path, start_step)
     elif args.init_from is not None:
         network = load_checkpoint(args.init_from).network
+        if args.init_time_conditioning is not None:
+            network = with_time_conditioning(network, args.init_time_conditioning)
         log.info("initialised from %s (%s, %s)", args.init_from, network.config.size, network.config.time_conditioning)
     else:
         seed_everything(args.seed)

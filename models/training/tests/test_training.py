@@ -2,6 +2,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from evgate_train.augment import Augmentation, apply
 from evgate_train.checkpoint import load_checkpoint
@@ -178,3 +179,31 @@ def test_training_rejects_a_cuda_device_torch_cannot_see(synthetic_dir, tmp_path
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     with pytest.raises(TrainingSetupError, match="no CUDA device"):
         train(_args(synthetic_dir, tmp_path / "run", 1, "--device", "cuda"))
+
+
+
+@pytest.mark.parametrize("variant", ["none", "reference"])
+def test_switching_time_conditioning_keeps_every_shared_weight(variant):
+    from evgate_train.checkpoint import with_time_conditioning
+    from evgate_train.network import NetworkConfig, SuppressionNetwork
+
+    original = SuppressionNetwork(NetworkConfig(size="XS", time_conditioning="position-aware"))
+    switched = with_time_conditioning(original, variant)
+    assert switched.config.time_conditioning == variant
+    source, weights = original.state_dict(), switched.state_dict()
+    outside = [name for name in source if not name.startswith("time_conditioning.")]
+    assert outside and all(torch.equal(weights[name], source[name]) for name in outside)
+    atc = [name for name in weights if name.startswith("time_conditioning.")]
+    if variant == "none":
+        assert atc == []
+    else:
+        # Same parameters, another query: the ablation changes only how they are used.
+        assert atc and all(torch.equal(weights[name], source[name]) for name in atc)
+
+
+def test_init_time_conditioning_fine_tunes_the_switched_network(synthetic_dir, tmp_path):
+    source = tmp_path / "source"
+    train(_args(synthetic_dir, source, 1))
+    run = tmp_path / "none"
+    train(_args(synthetic_dir, run, 1, "--init-from", str(source / "checkpoint.pt"), "--init-time-conditioning", "none"))
+    assert load_checkpoint(run / "checkpoint.pt").network.config.time_conditioning == "none"
