@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The project's test command (README, CI): installs what the tests need, then runs formatting,
 # lints, the Rust tests (unit, property, end-to-end with the real binaries) and the Python tests
-# of the training code.
+# of the training code and the scripts.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -21,5 +21,5 @@ echo "== cargo build of the binaries the end-to-end tests start"
 cargo build --bins -p evgate -p evgate-gate -p evgate-infer -p evgate-ingest
 echo "== cargo test"
 cargo test --workspace --features evgate/dsec
-echo "== pytest (models/training)"
-models/training/.venv/bin/python -m pytest -q models/training/tests
+echo "== pytest (models/training, scripts)"
+models/training/.venv/bin/python -m pytest -q models/training/tests scripts/tests
