@@ -4,6 +4,10 @@ Prediction = logit > 0. IMO and background IoU, mIoU = their NaN-aware mean, pIo
 over the pixels that hold at least one event, SR@0.5 = frames with IMO IoU >= 0.5 (a frame
 with no IMO in prediction and truth counts as a success), R@0.5 = ground-truth instances
 matched (Hungarian on IoU against 8-connected predicted components) with IoU > 0.5.
+
+Also (this module only): the predicted IMO area, false negatives and false positives as shares
+of the true IMO area, pooled over a sequence's frames; they tell a forecast that is too large
+(e.g. smeared over the strip a moving object uncovers) from one that is too small.
 """
 
 from dataclasses import dataclass, field
@@ -29,6 +33,10 @@ class FrameScores:
     success: bool
     instances_found: int
     instances_total: int
+    predicted_px: int
+    truth_px: int
+    false_negative_px: int
+    false_positive_px: int
 
 
 def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.ndarray | None) -> FrameScores:
@@ -47,6 +55,10 @@ def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.
         success=bool(np.isnan(imo) or imo >= 0.5),
         instances_found=found,
         instances_total=total,
+        predicted_px=int(np.count_nonzero(predicted)),
+        truth_px=int(np.count_nonzero(truth)),
+        false_negative_px=int(np.count_nonzero(truth & ~predicted)),
+        false_positive_px=int(np.count_nonzero(predicted & ~truth)),
     )
 
 
@@ -84,6 +96,11 @@ class SequenceScores:
 
         found = sum(f.instances_found for f in self.frames)
         total = sum(f.instances_total for f in self.frames)
+        truth_px = sum(f.truth_px for f in self.frames)
+
+        def share_of_truth(name: str) -> float:
+            return sum(getattr(f, name) for f in self.frames) / truth_px if truth_px else float("nan")
+
         return {
             "frames": len(self.frames),
             "miou": mean("miou"),
@@ -91,4 +108,7 @@ class SequenceScores:
             "piou": mean("piou"),
             "sr50": float(np.mean([f.success for f in self.frames])) if self.frames else float("nan"),
             "r50": found / total if total else float("nan"),
+            "area_ratio": share_of_truth("predicted_px"),
+            "false_negative_share": share_of_truth("false_negative_px"),
+            "false_positive_share": share_of_truth("false_positive_px"),
         }

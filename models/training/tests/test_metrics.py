@@ -45,3 +45,30 @@ def test_linear_extrapolation_continues_the_motion():
     expected = np.zeros((20, 40), bool)
     expected[5:9, 17:21] = True
     np.testing.assert_array_equal(forecast, expected)
+
+
+def test_area_and_error_shares_are_pooled_over_the_sequence():
+    from evgate_train.metrics import SequenceScores
+
+    truth = np.zeros((10, 10), np.uint8)
+    truth[2:6, 2:6] = 1  # 16 px
+    smeared = np.zeros((10, 10), bool)
+    smeared[2:6, 2:9] = True  # the object and the 12 px strip behind it: 28 px
+    shrunk = np.zeros((10, 10), bool)
+    shrunk[2:6, 2:4] = True  # half the object: 8 px
+    scores = SequenceScores()
+    scores.add(frame_scores(smeared, truth, None))
+    scores.add(frame_scores(shrunk, truth, None))
+    scores.add(frame_scores(np.zeros((10, 10), bool), np.zeros((10, 10), np.uint8), None))
+    summary = scores.summary()
+    assert summary["area_ratio"] == pytest.approx((28 + 8) / 32)
+    assert summary["false_positive_share"] == pytest.approx(12 / 32)
+    assert summary["false_negative_share"] == pytest.approx(8 / 32)
+
+
+def test_error_shares_are_undefined_without_any_true_object():
+    from evgate_train.metrics import SequenceScores
+
+    scores = SequenceScores()
+    scores.add(frame_scores(np.ones((4, 4), bool), np.zeros((4, 4), np.uint8), None))
+    assert np.isnan(scores.summary()["area_ratio"]) and np.isnan(scores.summary()["false_positive_share"])
