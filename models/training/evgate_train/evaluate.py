@@ -24,6 +24,7 @@ import torch
 from tqdm import tqdm
 
 from .checkpoint import load_checkpoint
+from .flow_forecasts import rigid_forecast, splat_forecast
 from .linear_extrapolation import extrapolate
 from .metrics import SequenceScores, frame_scores
 from .network import WARP_RESOLUTIONS, SuppressionNetwork
@@ -56,9 +57,11 @@ def evaluate_sequence(
     with_baselines: bool,
     max_seconds: float = 0.0,
     warp_resolution: str = "full",
+    flow_variants: bool = False,
 ) -> dict[str, SequenceScores]:
-    """Scores keyed "current", "future-<h>ms" (and "no-forecast-<h>ms", "linear-<h>ms");
-    `warp_resolution` as the network's (an export's default is "half")."""
+    """Scores keyed "current", "future-<h>ms" (and "no-forecast-<h>ms", "linear-<h>ms"; with
+    `flow_variants`, "rigid-<h>ms" and "splat-<h>ms" of `flow_forecasts`); `warp_resolution` as
+    the network's (an export's default is "half")."""
     network.eval()
     height, width = padded(sequence.height), padded(sequence.width)
     states = network.initial_states(1, height, width)
@@ -87,6 +90,10 @@ def evaluate_sequence(
             truth = sequence.masks[future]
             forecast = (out.future_mask_logits[0, k, : sequence.height, : sequence.width] > 0).numpy()
             scores[f"future-{horizon:g}ms"].add(frame_scores(forecast, truth, None))
+            if flow_variants:
+                flow = out.future_flow[0, k, :, : sequence.height, : sequence.width].numpy()
+                scores[f"rigid-{horizon:g}ms"].add(frame_scores(rigid_forecast(current, flow), truth, None))
+                scores[f"splat-{horizon:g}ms"].add(frame_scores(splat_forecast(current, flow), truth, None))
             if with_baselines:
                 scores[f"no-forecast-{horizon:g}ms"].add(frame_scores(current, truth, None))
                 moved = extrapolate(previous, current, WINDOW_US / 1000, horizon) if previous is not None else current
@@ -145,6 +152,12 @@ def main(argv: list[str] | None = None) -> int:
         help="where a checkpoint's future mask logits are warped: full (training) or half (what an export does by "
         "default); an .onnx model keeps the warp it was exported with",
     )
+    parser.add_argument(
+        "--flow-variants",
+        action="store_true",
+        help="also score each model's current mask moved by its flow without backward warping: rigidly per "
+        "component (median flow) and by forward splatting (keys rigid-<h>ms, splat-<h>ms)",
+    )
     parser.add_argument("--output", type=Path, required=True, help="JSON report path")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
@@ -166,6 +179,12 @@ def main(argv: list[str] | None = None) -> int:
         (name, load_export(path, args.threads) if path.suffix == ".onnx" else load_checkpoint(path)) for name, path in models
     ]
 
+    exports = [name for name, checkpoint in networks if isinstance(checkpoint.network, OnnxNetwork)]
+    if args.flow_variants and exports:
+        raise EvaluationSetupError(
+            f"--flow-variants needs the full-resolution flow of a checkpoint; {', '.join(exports)} is an export"
+        )
+
     def warp_resolution_of(checkpoint) -> str:
         network = checkpoint.network
         return network.warp_resolution if isinstance(network, OnnxNetwork) else args.warp_resolution
@@ -183,6 +202,7 @@ def main(argv: list[str] | None = None) -> int:
                 with_baselines=index == 0,
                 max_seconds=args.max_seconds,
                 warp_resolution=warp_resolution_of(checkpoint),
+                flow_variants=args.flow_variants,
             )
             results[name].append((sequence.preset, {key: s.summary() for key, s in scores.items()}))
     for name, checkpoint in networks:

@@ -80,3 +80,12 @@ def test_an_export_refuses_another_warp_resolution_or_size(tmp_path):
     states = network.initial_states(1, 48, 96)
     with pytest.raises(ExportError, match="exported with warp resolution half; full was asked for"):
         network(torch.zeros(1, 2, 48, 96), torch.tensor([[50.0]]), states, "full")
+
+
+def test_flow_variants_score_the_mask_moved_without_backward_warping(synthetic_dir):
+    torch.manual_seed(0)
+    network = SuppressionNetwork(NetworkConfig(size="XS"))
+    sequence = load_sequence(synthetic_dir / "slide-0.npz")
+    scores = evaluate_sequence(network, sequence, [100.0], with_baselines=False, flow_variants=True)
+    assert {"rigid-100ms", "splat-100ms"} <= set(scores)
+    assert len(scores["rigid-100ms"].frames) == len(scores["future-100ms"].frames) > 0
