@@ -15,17 +15,10 @@ points past the object.
 import numpy as np
 from scipy import ndimage
 
+from .linear_extrapolation import mark_inside
 from .metrics import EIGHT_CONNECTED
 
 CLOSING = np.ones((3, 3), dtype=bool)
-
-
-def _moved(mask_shape: tuple[int, int], rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    height, width = mask_shape
-    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
-    moved = np.zeros(mask_shape, dtype=bool)
-    moved[rows[inside], cols[inside]] = True
-    return moved
 
 
 def rigid_forecast(current: np.ndarray, flow: np.ndarray) -> np.ndarray:
@@ -36,13 +29,13 @@ def rigid_forecast(current: np.ndarray, flow: np.ndarray) -> np.ndarray:
         rows, cols = np.nonzero(labels == component)
         dx = int(round(float(np.median(flow[0][rows, cols]))))
         dy = int(round(float(np.median(flow[1][rows, cols]))))
-        forecast |= _moved(current.shape, rows + dy, cols + dx)
+        mark_inside(forecast, rows + dy, cols + dx)
     return forecast
 
 
 def splat_forecast(current: np.ndarray, flow: np.ndarray) -> np.ndarray:
     """current: bool [H, W]; flow: (dx, dy) [2, H, W] in pixels over the horizon."""
     rows, cols = np.nonzero(current)
-    target_rows = np.round(rows + flow[1][rows, cols]).astype(int)
-    target_cols = np.round(cols + flow[0][rows, cols]).astype(int)
-    return ndimage.binary_closing(_moved(current.shape, target_rows, target_cols), structure=CLOSING)
+    moved = np.zeros_like(current, dtype=bool)
+    mark_inside(moved, np.round(rows + flow[1][rows, cols]).astype(int), np.round(cols + flow[0][rows, cols]).astype(int))
+    return ndimage.binary_closing(moved, structure=CLOSING)

@@ -30,11 +30,15 @@ def extrapolate(previous: np.ndarray, current: np.ndarray, elapsed_ms: float, ho
         for now, before in zip(rows, cols):
             if distance[now, before] <= MAX_MATCH_DISTANCE_PX:
                 velocities[now] = (centroids[now] - previous_centroids[before]) / elapsed_ms
-    height, width = current.shape
     for index in range(count):
         row_shift, col_shift = np.round(velocities[index] * horizon_ms).astype(int)
         rows, cols = np.nonzero(labels == index + 1)
-        rows, cols = rows + row_shift, cols + col_shift
-        inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
-        forecast[rows[inside], cols[inside]] = True
+        mark_inside(forecast, rows + row_shift, cols + col_shift)
     return forecast
+
+
+def mark_inside(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> None:
+    """Sets the pixels (rows, cols) of `mask` that lie inside it; moved pixels may leave the image."""
+    height, width = mask.shape
+    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
+    mask[rows[inside], cols[inside]] = True
