@@ -86,8 +86,7 @@ def true_mask_warp_term(flow: torch.Tensor, batch: WindowBatch, weights: LossWei
     horizons = batch.future_mask.shape[1]
     per_horizon = batch.mask.unsqueeze(1).expand(-1, horizons, -1, -1, -1).flatten(0, 1)
     warped = backward_warp(per_horizon, flow).view_as(batch.future_mask)
-    warped = TRUE_MASK_MARGIN + (1.0 - 2.0 * TRUE_MASK_MARGIN) * warped
-    warped = torch.log(warped / (1.0 - warped))
+    warped = torch.logit(TRUE_MASK_MARGIN + (1.0 - 2.0 * TRUE_MASK_MARGIN) * warped)
     valid = batch.mask_valid.view(-1, 1, 1, 1).expand_as(batch.future_mask)
     return bce_dice(warped, batch.future_mask, valid, weights.dice, weights.positive)
 
