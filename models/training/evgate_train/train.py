@@ -193,6 +193,11 @@ def train(args: argparse.Namespace) -> Path:
         raise TrainingSetupError(f"--loader-workers {args.loader_workers}: must be 0 or more")
     if args.time_budget_s < 0:
         raise TrainingSetupError(f"--time-budget-s {args.time_budget_s}: must be 0 (none) or more")
+    if args.init_time_conditioning is not None and (args.init_from is None or args.resume):
+        raise TrainingSetupError(
+            f"--init-time-conditioning {args.init_time_conditioning}: needs --init-from and no --resume "
+            "(it switches the variant of the network a new run starts from)"
+        )
     check_input_size(args.crop, args.crop)
     paths = sorted(args.data.rglob("*.npz"))
     if not paths:

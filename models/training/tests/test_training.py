@@ -207,3 +207,8 @@ def test_init_time_conditioning_fine_tunes_the_switched_network(synthetic_dir, t
     run = tmp_path / "none"
     train(_args(synthetic_dir, run, 1, "--init-from", str(source / "checkpoint.pt"), "--init-time-conditioning", "none"))
     assert load_checkpoint(run / "checkpoint.pt").network.config.time_conditioning == "none"
+
+
+def test_init_time_conditioning_without_init_from_is_refused(synthetic_dir, tmp_path):
+    with pytest.raises(TrainingSetupError, match="--init-time-conditioning none: needs --init-from"):
+        train(_args(synthetic_dir, tmp_path / "run", 1, "--init-time-conditioning", "none"))
