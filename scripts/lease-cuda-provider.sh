@@ -18,7 +18,9 @@
 # bench JSON per configuration and the device's name into $OUT, and fails if ONNX Runtime fell
 # back to the CPU. Settings (environment): EVGATE_ORT_VERSION (1.31.1, the CPU wheel's version),
 # EVGATE_CUDA_ARCH (90: H100 and H200), EVGATE_LEASE_WINDOWS (200 measured windows per run),
-# EVGATE_L_WEIGHTS (models/training/runs/lease-L/weights-step709.pt, the shipped L's weights).
+# EVGATE_L_WEIGHTS (models/training/runs/lease-L/weights-step709.pt, the shipped L's weights),
+# EVGATE_LEASE_BENCH (an inference bench binary to use in place of the packed one, carried beside
+# the last part, so a changed bench needs no new pack).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -115,7 +117,7 @@ import json, sys
 report = json.load(open(sys.argv[1]))
 if sys.argv[2] == "cuda" and report["provider"] != "cuda":
     sys.exit(f"{sys.argv[1]}: ONNX Runtime ran on {report['provider']}, not cuda")
-print(f"{sys.argv[1]}: {report['provider']}, inference median {report['inference']['median_ms']:.2f} ms, p99 {report['inference']['p99_ms']:.2f} ms")
+print(f"{sys.argv[1]}: {report['provider']}, inference median {report['inference']['median-ms']:.2f} ms, p99 {report['inference']['p99-ms']:.2f} ms")
 PY
 }
 
@@ -136,9 +138,14 @@ print(":".join(sorted(dirs)))')
   ORT_DYLIB_PATH=$(ls "$received"/stage/ort/libonnxruntime.so.1.* | head -n 1)
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader > "$out/device.txt" || true
   echo "device: $(cat "$out/device.txt")"
-  # dlopen names the exact missing CUDA library, which ONNX Runtime's fall-back hides.
-  python3 -c 'import ctypes, sys; ctypes.CDLL(sys.argv[1])' "$received/stage/ort/libonnxruntime_providers_cuda.so" ||
-    fail "the CUDA provider library does not load (LD_LIBRARY_PATH=$LD_LIBRARY_PATH)"
+  # ONNX Runtime's fall-back to the CPU hides which CUDA library is missing; ldd names it. (A
+  # plain dlopen of the provider cannot check this: its initialisers need ONNX Runtime loaded.)
+  if ldd "$received/stage/ort/libonnxruntime_providers_cuda.so" | grep "not found"; then
+    fail "the CUDA provider's libraries above are missing (LD_LIBRARY_PATH=$LD_LIBRARY_PATH)"
+  fi
+  if [ -n "${EVGATE_LEASE_BENCH:-}" ]; then
+    cp "$EVGATE_LEASE_BENCH" "$received/stage/inference-bench"
+  fi
   bench cuda-L-640x480-K1 "$received/stage/evgate-L-640x480.onnx" cuda 1
   bench cuda-L-640x480-K8 "$received/stage/evgate-L-640x480.onnx" cuda 8
   bench cuda-L-346x260-K8 models/evgate-L.onnx cuda 8
