@@ -11,6 +11,7 @@
 //! | `EVGATE_BENCH_THREADS` | 2 (intra-op threads) |
 //! | `EVGATE_BENCH_SPIN` | false (idle ONNX Runtime threads spin when true) |
 //! | `EVGATE_BENCH_PROVIDER` | cpu (cpu, cuda, auto) |
+//! | `EVGATE_BENCH_STATE_BINDING` | auto (auto, always, never: where the recurrent state lives) |
 //! | `EVGATE_BENCH_HORIZONS` | `MAX_HORIZONS` (8, the infer service's default): K, spread evenly up to the model's largest horizon |
 //! | `EVGATE_BENCH_WINDOWS` | 200 measured windows (after 20 warm-up windows) |
 //! | `EVGATE_BENCH_EVENTS` | 100000 events per 50 ms window |
@@ -24,7 +25,7 @@ use std::time::{Duration, Instant};
 
 use evgate_core::{BitMask, Event, SensorSize, TimeSpan, VoxelGrid};
 use evgate_ipc::MAX_HORIZONS;
-use evgate_model::{ModelRuntime, Provider, RuntimeOptions};
+use evgate_model::{ModelRuntime, Provider, RuntimeOptions, StateBinding};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -78,6 +79,8 @@ struct InferenceReport {
     sensor: String,
     input: String,
     provider: String,
+    /// Whether the recurrent state stayed bound to the session's device between windows.
+    state_bound: bool,
     intra_threads: usize,
     spin_threads: bool,
     cpu_cores_visible: usize,
@@ -188,6 +191,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let threads: usize = setting("EVGATE_BENCH_THREADS", 2);
     let spin_threads: bool = setting("EVGATE_BENCH_SPIN", false);
     let provider: Provider = setting("EVGATE_BENCH_PROVIDER", Provider::Cpu);
+    let state_binding: StateBinding = setting("EVGATE_BENCH_STATE_BINDING", StateBinding::Auto);
     let horizon_count: usize =
         setting("EVGATE_BENCH_HORIZONS", MAX_HORIZONS).clamp(1, MAX_HORIZONS);
     let windows: usize = setting("EVGATE_BENCH_WINDOWS", 200).max(1);
@@ -201,6 +205,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         provider,
         intra_threads: threads,
         spin_threads,
+        state_binding,
         ..RuntimeOptions::default()
     };
     let mut runtime = ModelRuntime::load(&model, options)?;
@@ -290,6 +295,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sensor: sensor.to_string(),
         input: input.to_string(),
         provider: runtime.active_provider().to_string(),
+        state_bound: runtime.state_bound(),
         intra_threads: threads,
         spin_threads,
         cpu_cores_visible: std::thread::available_parallelism().map_or(0, |n| n.get()),
@@ -314,13 +320,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
 
     println!(
-        "model {} ({}), sensor {} → input {}, {} on {} threads, {} windows of {} events",
+        "model {} ({}), sensor {} → input {}, {} on {} threads, state {}, {} windows of {} events",
         report.model.display(),
         report.model_size,
         report.sensor,
         report.input,
         report.provider,
         report.intra_threads,
+        if report.state_bound {
+            "bound to the device"
+        } else {
+            "through host memory"
+        },
         report.windows,
         report.events_per_window
     );

@@ -12,6 +12,9 @@
 #   there, call N:        bash scripts/lease-cuda-provider.sh receive <N> &&
 #                         bash scripts/lease-cuda-provider.sh measure "$OUT"
 #                         (carry .lease-cuda/part-<N> and .lease-cuda/payload.sha256)
+#   there, optionally:    bash scripts/lease-cuda-provider.sh pipeline "$OUT" <folder>
+#                         (<folder>: stripped release builds of the four evgate binaries,
+#                         carried as an xz tar; the main job with inference on CUDA, then CPU)
 #
 # The calls must follow each other while the machine is warm (it goes back 30 s after a call);
 # received parts wait outside the repository, in /tmp/evgate-cuda-lease. `measure` writes one
@@ -20,7 +23,9 @@
 # EVGATE_CUDA_ARCH (90: H100 and H200), EVGATE_LEASE_WINDOWS (200 measured windows per run),
 # EVGATE_L_WEIGHTS (models/training/runs/lease-L/weights-step709.pt, the shipped L's weights),
 # EVGATE_LEASE_BENCH (an inference bench binary to use in place of the packed one, carried beside
-# the last part, so a changed bench needs no new pack).
+# the last part, so a changed bench needs no new pack), EVGATE_LEASE_RUNTIME_TEST (evgate-model's
+# `runtime` test binary, from `cargo test --release -p evgate-model --test runtime --no-run`:
+# its state-binding test then runs on CUDA too).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -105,9 +110,10 @@ receive() {
 }
 
 bench() {
-  local name=$1 model=$2 provider=$3 horizons=$4
-  echo "measure: $name ($model, $provider, K=$horizons)" >&2
+  local name=$1 model=$2 provider=$3 horizons=$4 state_binding=${5:-auto}
+  echo "measure: $name ($model, $provider, K=$horizons, state binding $state_binding)" >&2
   EVGATE_BENCH_MODEL="$model" EVGATE_BENCH_PROVIDER="$provider" EVGATE_BENCH_HORIZONS="$horizons" \
+    EVGATE_BENCH_STATE_BINDING="$state_binding" \
     EVGATE_BENCH_WINDOWS="$windows" EVGATE_BENCH_JSON="$out/$name.json" RUST_LOG=warn \
     "$received/stage/inference-bench" > "$received/$name.log" 2>&1 || { tail -n 20 "$received/$name.log"; fail "$name: the bench failed"; }
   grep -i -m 5 "warn\|error" "$received/$name.log" || true
@@ -121,14 +127,9 @@ print(f"{sys.argv[1]}: {report['provider']}, inference median {report['inference
 PY
 }
 
-measure() {
-  out=$1
-  [ -n "$out" ] || fail "measure needs the folder for its results"
-  [ -f "$received/payload.sha256" ] || fail "payload.sha256 was not received (carry it with the last part)"
-  (cd "$received" && cat $(ls part-* | sort -t- -k2 -n) > payload.tar.xz && sha256sum -c payload.sha256) ||
-    fail "the received parts do not reassemble into the packed payload (a part missing or from another pack?)"
-  rm -rf "$received/stage" && mkdir -p "$received/stage"
-  tar -C "$received/stage" -xJf "$received/payload.tar.xz"
+# Points the dynamic loader and `ort` at the received CUDA build of ONNX Runtime and the
+# machine's CUDA libraries (the nvidia-* Python packages), and records the device in $1.
+provider_environment() {
   local cuda_libraries
   cuda_libraries=$(python3 -c 'import glob, os, site
 dirs = {os.path.dirname(p) for s in site.getsitepackages() for p in glob.glob(os.path.join(s, "nvidia", "**", "lib*.so*"), recursive=True)}
@@ -136,26 +137,71 @@ print(":".join(sorted(dirs)))')
   export LD_LIBRARY_PATH="$received/stage/ort${cuda_libraries:+:$cuda_libraries}${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
   export ORT_DYLIB_PATH
   ORT_DYLIB_PATH=$(ls "$received"/stage/ort/libonnxruntime.so.1.* | head -n 1)
-  nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader > "$out/device.txt" || true
-  echo "device: $(cat "$out/device.txt")"
+  nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader > "$1/device.txt" || true
+  echo "device: $(cat "$1/device.txt")"
   # ONNX Runtime's fall-back to the CPU hides which CUDA library is missing; ldd names it. (A
   # plain dlopen of the provider cannot check this: its initialisers need ONNX Runtime loaded.)
   if ldd "$received/stage/ort/libonnxruntime_providers_cuda.so" | grep "not found"; then
     fail "the CUDA provider's libraries above are missing (LD_LIBRARY_PATH=$LD_LIBRARY_PATH)"
   fi
+}
+
+unpack() {
+  [ -f "$received/payload.sha256" ] || fail "payload.sha256 was not received (carry it with the last part)"
+  (cd "$received" && cat $(ls part-* | sort -t- -k2 -n) > payload.tar.xz && sha256sum -c payload.sha256) ||
+    fail "the received parts do not reassemble into the packed payload (a part missing or from another pack?)"
+  rm -rf "$received/stage" && mkdir -p "$received/stage"
+  tar -C "$received/stage" -xJf "$received/payload.tar.xz"
+}
+
+measure() {
+  out=$1
+  [ -n "$out" ] || fail "measure needs the folder for its results"
+  unpack
+  provider_environment "$out"
   if [ -n "${EVGATE_LEASE_BENCH:-}" ]; then
     cp "$EVGATE_LEASE_BENCH" "$received/stage/inference-bench"
   fi
   bench cuda-L-640x480-K1 "$received/stage/evgate-L-640x480.onnx" cuda 1
   bench cuda-L-640x480-K8 "$received/stage/evgate-L-640x480.onnx" cuda 8
+  bench cuda-L-640x480-K8-host-state "$received/stage/evgate-L-640x480.onnx" cuda 8 never
   bench cuda-L-346x260-K8 models/evgate-L.onnx cuda 8
   bench cuda-S-346x260-K8 models/evgate-S.onnx cuda 8
   bench cpu-S-346x260-K8 models/evgate-S.onnx cpu 8
+  if [ -n "${EVGATE_LEASE_RUNTIME_TEST:-}" ]; then
+    echo "measure: the state-binding test of evgate-model on cuda" >&2
+    EVGATE_TEST_PROVIDER=cuda EVGATE_TEST_MODEL=models/evgate-S.onnx "$EVGATE_LEASE_RUNTIME_TEST" \
+      a_bound_state --nocapture 2>&1 | tee "$out/runtime-test-cuda.log"
+  fi
+}
+
+# The main job (`evgate run`, three processes over iceoryx2) on the simulated camera with the
+# inference service on the CUDA provider, then on the CPU provider, once all parts are received.
+# $2: a folder holding release builds of evgate, evgate-ingest, evgate-infer and evgate-gate
+# (carried, xz-compressed beside the last part: they are not in the payload).
+pipeline() {
+  out=$1 binaries=$2
+  [ -n "$out" ] && [ -x "$binaries/evgate" ] || fail "pipeline needs the folder for its results and a folder with the evgate binaries"
+  [ -d "$received/stage/ort" ] || unpack
+  provider_environment "$out"
+  for provider in cuda cpu; do
+    echo "pipeline: evgate run --provider $provider --duration 3" >&2
+    RUST_LOG=warn "$binaries/evgate" run --provider "$provider" --duration 3 --json \
+      > "$out/run-$provider.json" 2> "$out/run-$provider.log" || { tail -n 20 "$out/run-$provider.log"; fail "evgate run on $provider failed"; }
+    python3 - "$out/run-$provider.json" <<'PY'
+import json, sys
+run = json.load(open(sys.argv[1]))
+infer = run["services"]["evgate-infer"]
+print(sys.argv[1], infer.get("provider"), "inference median", infer["inference"]["median-ms"], "ms;",
+      "kept ratio", run["kept-ratio"], "F1", run["scores"]["f1"] if run.get("scores") else None, "balanced", run["balanced"])
+PY
+  done
 }
 
 case "${1:-}" in
   pack) pack ;;
   receive) [ -n "${2:-}" ] || fail "receive needs a part number"; receive "$2" ;;
   measure) measure "${2:-}" ;;
-  *) fail "unknown step '${1:-}'; accepted: pack, receive <k>, measure <out-folder>" ;;
+  pipeline) pipeline "${2:-}" "${3:-}" ;;
+  *) fail "unknown step '${1:-}'; accepted: pack, receive <k>, measure <out-folder>, pipeline <out-folder> <binaries-folder>" ;;
 esac

@@ -2,6 +2,7 @@
 //! exported network, checks it against docs/model-contract.md, and runs one 50 ms window at a
 //! time with the ConvGRU state carried inside.
 
+pub mod bound_state;
 pub mod contract;
 pub mod environment;
 pub mod identity;
@@ -14,6 +15,6 @@ pub mod state;
 
 pub use library::{locate_onnxruntime, LibraryError};
 pub use metadata::{AtcVariant, MetadataError, ModelMetadata, ModelSize};
-pub use options::{ActiveProvider, Provider, RuntimeOptions};
+pub use options::{ActiveProvider, Provider, RuntimeOptions, StateBinding};
 pub use output::ForecastOutput;
 pub use runtime::{ModelError, ModelRuntime};

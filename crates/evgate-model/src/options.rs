@@ -1,4 +1,4 @@
-//! How a session is set up: execution provider and CPU threads.
+//! How a session is set up: execution provider, CPU threads and where the state lives.
 
 use std::fmt;
 use std::path::PathBuf;
@@ -53,6 +53,67 @@ impl fmt::Display for Provider {
     }
 }
 
+/// Where the recurrent state lives between windows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StateBinding {
+    /// Bound to the session's device when the session runs on CUDA, passed through host
+    /// memory on the CPU (where binding gains nothing).
+    #[default]
+    Auto,
+    /// Bound on any provider; on the CPU the state stays in host memory either way, so this
+    /// serves to compare the two paths.
+    Always,
+    /// Passed as run inputs and returned as run outputs every window: on CUDA each window copies
+    /// every state tensor to the device and back.
+    Never,
+}
+
+/// Accepted spellings of [`StateBinding`], for messages.
+pub const STATE_BINDING_NAMES: &str = "auto, always, never";
+
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown state binding {value:?}; accepted values: {STATE_BINDING_NAMES}")]
+pub struct StateBindingParseError {
+    pub value: String,
+}
+
+impl FromStr for StateBinding {
+    type Err = StateBindingParseError;
+
+    fn from_str(value: &str) -> Result<Self, Self::Err> {
+        match value.trim().to_ascii_lowercase().as_str() {
+            "auto" => Ok(Self::Auto),
+            "always" => Ok(Self::Always),
+            "never" => Ok(Self::Never),
+            _ => Err(StateBindingParseError {
+                value: value.to_owned(),
+            }),
+        }
+    }
+}
+
+impl fmt::Display for StateBinding {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Auto => "auto",
+            Self::Always => "always",
+            Self::Never => "never",
+        })
+    }
+}
+
+impl StateBinding {
+    /// Whether a session on `provider` binds its state.
+    pub fn binds_on(self, provider: ActiveProvider) -> bool {
+        match self {
+            Self::Auto => provider == ActiveProvider::Cuda,
+            Self::Always => true,
+            Self::Never => false,
+        }
+    }
+}
+
 /// The provider a session actually runs on after any fall-back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -84,6 +145,8 @@ pub struct RuntimeOptions {
     pub cuda_device: i32,
     /// Library to load instead of the discovered one (see `library`).
     pub library: Option<PathBuf>,
+    /// Where the recurrent state lives between windows.
+    pub state_binding: StateBinding,
 }
 
 impl Default for RuntimeOptions {
@@ -94,6 +157,7 @@ impl Default for RuntimeOptions {
             spin_threads: false,
             cuda_device: 0,
             library: None,
+            state_binding: StateBinding::Auto,
         }
     }
 }
@@ -113,6 +177,30 @@ mod tests {
     fn unknown_provider_lists_accepted_values() {
         let message = "tensorrt".parse::<Provider>().unwrap_err().to_string();
         assert!(message.contains("tensorrt") && message.contains(PROVIDER_NAMES));
+    }
+
+    #[test]
+    fn state_binding_round_trips_and_lists_accepted_values() {
+        for binding in [
+            StateBinding::Auto,
+            StateBinding::Always,
+            StateBinding::Never,
+        ] {
+            assert_eq!(
+                binding.to_string().parse::<StateBinding>().unwrap(),
+                binding
+            );
+        }
+        let message = "device".parse::<StateBinding>().unwrap_err().to_string();
+        assert!(message.contains("device") && message.contains(STATE_BINDING_NAMES));
+    }
+
+    #[test]
+    fn auto_binds_the_state_on_cuda_only() {
+        assert!(StateBinding::Auto.binds_on(ActiveProvider::Cuda));
+        assert!(!StateBinding::Auto.binds_on(ActiveProvider::Cpu));
+        assert!(StateBinding::Always.binds_on(ActiveProvider::Cpu));
+        assert!(!StateBinding::Never.binds_on(ActiveProvider::Cuda));
     }
 
     #[test]

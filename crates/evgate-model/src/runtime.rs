@@ -10,6 +10,7 @@ use ort::session::builder::{GraphOptimizationLevel, SessionBuilder};
 use ort::session::Session;
 use ort::value::{Tensor, TensorRef, TensorValueType};
 
+use crate::bound_state::BoundState;
 use crate::contract::{
     self, ContractError, INPUT_HORIZONS, INPUT_STATES, INPUT_VOXEL, OUTPUT_FUTURE_FLOW,
     OUTPUT_FUTURE_MASK, OUTPUT_MASK, OUTPUT_STATES,
@@ -109,6 +110,8 @@ pub struct ModelRuntime {
     metadata: ModelMetadata,
     provider: ActiveProvider,
     state: RecurrentState,
+    /// The state bound to the session's device (see [`crate::options::StateBinding`]).
+    bound_state: Option<BoundState>,
 }
 
 impl ModelRuntime {
@@ -160,10 +163,20 @@ impl ModelRuntime {
                 source,
             },
         )?;
-        let state = RecurrentState::zeros(&metadata).map_err(|source| ModelError::State {
+        let state_error = |source: ort::Error| ModelError::State {
             path: path.clone(),
             source,
-        })?;
+        };
+        let state = RecurrentState::zeros(&metadata).map_err(state_error)?;
+        let bound_state = if options.state_binding.binds_on(provider) {
+            let shapes = std::array::from_fn(|stage| metadata.state_shape(stage));
+            Some(
+                BoundState::new(&session, &shapes, provider, options.cuda_device)
+                    .map_err(state_error)?,
+            )
+        } else {
+            None
+        };
         tracing::info!(
             model = %path.display(),
             model_id = %format!("{model_id:016x}"),
@@ -171,6 +184,7 @@ impl ModelRuntime {
             input = %format!("{}x{}", metadata.input_width, metadata.input_height),
             %provider,
             threads = options.intra_threads,
+            state_bound = bound_state.is_some(),
             "model loaded"
         );
         Ok(Self {
@@ -180,6 +194,7 @@ impl ModelRuntime {
             metadata,
             provider,
             state,
+            bound_state,
         })
     }
 
@@ -206,6 +221,12 @@ impl ModelRuntime {
         self.provider
     }
 
+    /// Whether the recurrent state is bound to the session's device (see
+    /// [`crate::options::StateBinding`]).
+    pub fn state_bound(&self) -> bool {
+        self.bound_state.is_some()
+    }
+
     /// Windows fed since load or the last [`Self::reset_state`].
     pub fn windows_carried(&self) -> u64 {
         self.state.windows_carried()
@@ -213,10 +234,25 @@ impl ModelRuntime {
 
     /// Forgets the past: the next window starts from zero states (a new stream, a gap).
     pub fn reset_state(&mut self) -> Result<(), ModelError> {
+        if let Some(bound) = &mut self.bound_state {
+            bound.reset();
+        }
         self.state.reset().map_err(|source| ModelError::State {
             path: self.model_path.clone(),
             source,
         })
+    }
+
+    /// Runs one empty window with `horizons_ms` and forgets it: ONNX Runtime sets much up on
+    /// the first run of a shape (on CUDA, cuDNN's algorithm search), which a stream should not
+    /// wait for. Returns how long that run took.
+    pub fn warm_up(&mut self, horizons_ms: &[f32]) -> Result<std::time::Duration, ModelError> {
+        let length = self.metadata.bins as usize * self.input_size().pixels();
+        let started = Instant::now();
+        self.forecast(&vec![0.0; length], horizons_ms)?;
+        let elapsed = started.elapsed();
+        self.reset_state()?;
+        Ok(elapsed)
     }
 
     /// Runs one window: `voxel` is the `[2, H, W]` grid at the padded input size, `horizons_ms`
@@ -237,44 +273,77 @@ impl ModelRuntime {
             source,
         };
 
-        let voxel_tensor = TensorRef::from_array_view(([1usize, bins, height, width], voxel))
-            .map_err(run_error)?;
-        let horizons_tensor =
-            TensorRef::from_array_view(([horizons_ms.len()], horizons_ms)).map_err(run_error)?;
-        let [state_0, state_1, state_2, state_3] = self.state.tensors();
-        let inputs = ort::inputs! {
-            INPUT_VOXEL => voxel_tensor,
-            INPUT_HORIZONS => horizons_tensor,
-            INPUT_STATES[0] => state_0,
-            INPUT_STATES[1] => state_1,
-            INPUT_STATES[2] => state_2,
-            INPUT_STATES[3] => state_3,
-        };
-        let started = Instant::now();
-        let mut outputs = self.session.run(inputs).map_err(run_error)?;
-        let inference_time = started.elapsed();
-
+        let voxel_shape = [1usize, bins, height, width];
         let horizon_count = horizons_ms.len() as i64;
         let (h, w) = (height as i64, width as i64);
-        let mut take = |name: &'static str, expected: Vec<i64>| {
-            take_output(&mut outputs, path, name, expected)
-        };
-        let mask_logits = take(OUTPUT_MASK, vec![1, 1, h, w])?;
-        let future_mask_logits = take(OUTPUT_FUTURE_MASK, vec![1, horizon_count, h, w])?;
         let (flow_height, flow_width) = self.metadata.flow_size();
-        let future_flow = take(
-            OUTPUT_FUTURE_FLOW,
-            vec![1, horizon_count, 2, flow_height as i64, flow_width as i64],
-        )?;
-        let state_shape = |stage: usize| self.state.shape(stage).map(|d| d as i64).to_vec();
-        let next_state = [
-            take(OUTPUT_STATES[0], state_shape(0))?,
-            take(OUTPUT_STATES[1], state_shape(1))?,
-            take(OUTPUT_STATES[2], state_shape(2))?,
-            take(OUTPUT_STATES[3], state_shape(3))?,
-        ];
-        drop(outputs);
-        self.state.advance(next_state);
+        let take_forecast = |outputs: &mut ort::session::SessionOutputs<'_>| {
+            Ok::<_, ModelError>([
+                take_output(outputs, path, OUTPUT_MASK, vec![1, 1, h, w])?,
+                take_output(
+                    outputs,
+                    path,
+                    OUTPUT_FUTURE_MASK,
+                    vec![1, horizon_count, h, w],
+                )?,
+                take_output(
+                    outputs,
+                    path,
+                    OUTPUT_FUTURE_FLOW,
+                    vec![1, horizon_count, 2, flow_height as i64, flow_width as i64],
+                )?,
+            ])
+        };
+
+        let started = Instant::now();
+        let [mask_logits, future_mask_logits, future_flow] = match &mut self.bound_state {
+            Some(bound) => {
+                // Owned copies: binding a borrowed view would make ONNX Runtime clone it anyway.
+                let voxel_tensor =
+                    Tensor::from_array((voxel_shape, voxel.to_vec())).map_err(run_error)?;
+                let horizons_tensor =
+                    Tensor::from_array(([horizons_ms.len()], horizons_ms.to_vec()))
+                        .map_err(run_error)?;
+                let binding = bound
+                    .bind(&voxel_tensor, &horizons_tensor, self.state.tensors())
+                    .map_err(run_error)?;
+                let mut outputs = self.session.run_binding(binding).map_err(run_error)?;
+                let forecast = take_forecast(&mut outputs)?;
+                drop(outputs);
+                bound.commit();
+                self.state.count_window();
+                forecast
+            }
+            None => {
+                let voxel_tensor =
+                    TensorRef::from_array_view((voxel_shape, voxel)).map_err(run_error)?;
+                let horizons_tensor =
+                    TensorRef::from_array_view(([horizons_ms.len()], horizons_ms))
+                        .map_err(run_error)?;
+                let [state_0, state_1, state_2, state_3] = self.state.tensors();
+                let inputs = ort::inputs! {
+                    INPUT_VOXEL => voxel_tensor,
+                    INPUT_HORIZONS => horizons_tensor,
+                    INPUT_STATES[0] => state_0,
+                    INPUT_STATES[1] => state_1,
+                    INPUT_STATES[2] => state_2,
+                    INPUT_STATES[3] => state_3,
+                };
+                let mut outputs = self.session.run(inputs).map_err(run_error)?;
+                let forecast = take_forecast(&mut outputs)?;
+                let state_shape = |stage: usize| self.state.shape(stage).map(|d| d as i64).to_vec();
+                let next_state = [
+                    take_output(&mut outputs, path, OUTPUT_STATES[0], state_shape(0))?,
+                    take_output(&mut outputs, path, OUTPUT_STATES[1], state_shape(1))?,
+                    take_output(&mut outputs, path, OUTPUT_STATES[2], state_shape(2))?,
+                    take_output(&mut outputs, path, OUTPUT_STATES[3], state_shape(3))?,
+                ];
+                drop(outputs);
+                self.state.advance(next_state);
+                forecast
+            }
+        };
+        let inference_time = started.elapsed();
         Ok(ForecastOutput {
             height,
             width,

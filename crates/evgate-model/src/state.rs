@@ -45,6 +45,12 @@ impl RecurrentState {
         self.windows_carried += 1;
     }
 
+    /// Counts a window whose states were kept elsewhere (bound to the session's device), so
+    /// these tensors stay the zero states.
+    pub fn count_window(&mut self) {
+        self.windows_carried += 1;
+    }
+
     /// Windows seen since the last reset.
     pub fn windows_carried(&self) -> u64 {
         self.windows_carried

@@ -289,3 +289,94 @@ fn cuda_library_present() -> bool {
         })
         .is_some_and(|provider| provider.is_file())
 }
+
+/// Every output of `runtime` over the windows `seeds`, with a reset before the last one and
+/// the horizon count changed in between, flattened for comparison.
+fn run_sequence(runtime: &mut ModelRuntime, seeds: &[u64]) -> Vec<Vec<f32>> {
+    let mut results = Vec::new();
+    for (index, &seed) in seeds.iter().enumerate() {
+        if index + 1 == seeds.len() {
+            runtime.reset_state().unwrap();
+        }
+        let horizons: &[f32] = if index % 2 == 0 { &HORIZONS } else { &[100.0] };
+        let voxel = pseudo_voxel(voxel_length(runtime), seed);
+        let output = runtime.forecast(&voxel, horizons).unwrap();
+        results.push(output.mask_logits().to_vec());
+        results.push(output.future_mask_logits().flatten().copied().collect());
+        results.push(
+            output
+                .future_flows()
+                .flat_map(|(dx, dy)| dx.iter().chain(dy).copied())
+                .collect(),
+        );
+    }
+    results
+}
+
+/// `EVGATE_TEST_PROVIDER=cuda` runs the state-binding test on a GPU (where binding keeps the
+/// state in device memory); CI has none and runs it on the CPU.
+fn test_provider() -> evgate_model::Provider {
+    std::env::var("EVGATE_TEST_PROVIDER").map_or(evgate_model::Provider::Cpu, |name| {
+        name.parse().expect("EVGATE_TEST_PROVIDER")
+    })
+}
+
+#[test]
+fn a_bound_state_forecasts_as_the_state_passed_through_host_memory() {
+    use evgate_model::{ActiveProvider, StateBinding};
+    let load_with = |state_binding| {
+        let options = RuntimeOptions {
+            provider: test_provider(),
+            state_binding,
+            ..RuntimeOptions::default()
+        };
+        ModelRuntime::load(model_path(), options).unwrap()
+    };
+    let mut passed = load_with(StateBinding::Never);
+    let mut bound = load_with(StateBinding::Always);
+    let on_cuda = bound.active_provider() == ActiveProvider::Cuda;
+    assert!(!passed.state_bound());
+    assert!(bound.state_bound());
+    assert_eq!(load_with(StateBinding::Auto).state_bound(), on_cuda);
+    // Two CUDA sessions may pick different convolution algorithms; the CPU's are the same.
+    let tolerance = if on_cuda { 1e-3 } else { 1e-5 };
+
+    let seeds = [1, 2, 3, 4, 5];
+    let expected = run_sequence(&mut passed, &seeds);
+    let actual = run_sequence(&mut bound, &seeds);
+    assert_eq!(bound.windows_carried(), passed.windows_carried());
+    for (index, (a, b)) in expected.iter().zip(&actual).enumerate() {
+        assert_eq!(a.len(), b.len(), "output {index}");
+        let difference = max_abs_difference(a, b);
+        println!("output {index}: bound and passed state differ by at most {difference:e}");
+        assert!(
+            difference < tolerance,
+            "output {index} differs by {difference}"
+        );
+    }
+
+    // A refused window leaves the bound state as it was.
+    let mut refused = load_with(StateBinding::Always);
+    let mut reference = load_with(StateBinding::Always);
+    let first = pseudo_voxel(voxel_length(&refused), 1);
+    let second = pseudo_voxel(voxel_length(&refused), 2);
+    refused.forecast(&first, &HORIZONS).unwrap();
+    reference.forecast(&first, &HORIZONS).unwrap();
+    assert!(refused.forecast(&first, &[10.0, 1e6]).is_err());
+    let after_refusal = refused.forecast(&second, &HORIZONS).unwrap();
+    let without = reference.forecast(&second, &HORIZONS).unwrap();
+    assert!(max_abs_difference(after_refusal.mask_logits(), without.mask_logits()) < tolerance);
+}
+
+#[test]
+fn warm_up_leaves_the_runtime_as_loaded() {
+    let mut warmed = load();
+    let mut fresh = load();
+    warmed.warm_up(&HORIZONS).unwrap();
+    assert_eq!(warmed.windows_carried(), 0);
+    let voxel = pseudo_voxel(voxel_length(&fresh), 3);
+    let after_warm_up = warmed.forecast(&voxel, &HORIZONS).unwrap();
+    let without = fresh.forecast(&voxel, &HORIZONS).unwrap();
+    assert!(max_abs_difference(after_warm_up.mask_logits(), without.mask_logits()) < 1e-6);
+    assert!(warmed.warm_up(&[]).is_err(), "warm-up accepted no horizons");
+}

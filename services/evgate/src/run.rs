@@ -61,6 +61,10 @@ pub struct RunArgs {
     /// Exported network the inference runs.
     #[arg(long, default_value = "models/evgate-S.onnx")]
     model: PathBuf,
+    /// Execution provider of the inference service: cpu, cuda (falls back to cpu with a
+    /// warning when CUDA cannot be used) or auto.
+    #[arg(long, default_value = "cpu")]
+    provider: evgate_model::Provider,
     /// Run without the inference service: every event then follows --no-forecast.
     #[arg(long)]
     no_infer: bool,
@@ -180,6 +184,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         infer_args.extend([
             "--model".to_owned(),
             args.model.display().to_string(),
+            "--provider".to_owned(),
+            args.provider.to_string(),
             "--exit-at-end".to_owned(),
         ]);
         services.push(Service::start(&directory, "evgate-infer", &infer_args)?);

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use evgate_model::Provider;
+use evgate_model::{Provider, StateBinding};
 use serde::Serialize;
 
 /// Runs the suppression network on the event stream of one pipeline and publishes forecast
@@ -29,6 +29,11 @@ pub struct InferArgs {
     /// CUDA device ordinal for the cuda and auto providers.
     #[arg(long, default_value_t = 0)]
     pub cuda_device: i32,
+    /// Where the network's recurrent state lives between windows: auto (in GPU memory when the
+    /// session runs on CUDA, saving a copy of every state tensor to the host and back per
+    /// window), always (bound on the CPU too) or never (passed through host memory).
+    #[arg(long, default_value = "auto")]
+    pub state_binding: StateBinding,
     /// Pipeline domain: the first part of the service names `<domain>/<camera>/<stream>`.
     #[arg(long, default_value = "evgate")]
     pub domain: String,

@@ -38,10 +38,15 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
         spin_threads: args.spin_threads,
         cuda_device: args.cuda_device,
         library: None,
+        state_binding: args.state_binding,
     };
-    let runtime = ModelRuntime::load(&args.model, options)?;
+    let mut runtime = ModelRuntime::load(&args.model, options)?;
     let metadata = runtime.metadata().clone();
     let horizons_ms = resolve_horizons(&args.horizons_ms, metadata.max_horizon_ms)?;
+    // Before subscribing, so that the stream (which waits for its subscribers) does not flow
+    // past a first window that on CUDA took 2 s (H200: cuDNN's algorithm search).
+    let warm_up = runtime.warm_up(&horizons_ms)?;
+    info!(warm_up_ms = warm_up.as_secs_f64() * 1e3, "model warmed up");
     let window_us = i64::from(metadata.window_ms) * 1000;
     let mode = match args.window_events {
         Some(events) => WindowMode::EventCount { events },
@@ -58,6 +63,8 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
         model_id: runtime.model_id(),
         model_size: metadata.model_size.label(),
         provider: runtime.active_provider(),
+        state_bound: runtime.state_bound(),
+        warm_up_ms: warm_up.as_secs_f64() * 1e3,
         threads: args.threads,
         horizons_ms: horizons_ms.clone(),
         windowing: describe(mode),

@@ -56,6 +56,10 @@ pub struct RunDescription {
     pub model_id: u64,
     pub model_size: &'static str,
     pub provider: ActiveProvider,
+    /// Whether the recurrent state stays bound to the session's device between windows.
+    pub state_bound: bool,
+    /// The run on a zero window before subscribing, which pays ONNX Runtime's lazy set-up.
+    pub warm_up_ms: f64,
     pub threads: usize,
     pub horizons_ms: Vec<f32>,
     pub windowing: String,
@@ -80,6 +84,8 @@ pub struct InferReport {
     pub model_id: String,
     pub model_size: &'static str,
     pub provider: ActiveProvider,
+    pub state_bound: bool,
+    pub warm_up_ms: f64,
     pub threads: usize,
     pub horizons_ms: Vec<f32>,
     pub windowing: String,
@@ -120,6 +126,8 @@ impl InferReport {
             model_id: format!("{:016x}", description.model_id),
             model_size: description.model_size,
             provider: description.provider,
+            state_bound: description.state_bound,
+            warm_up_ms: description.warm_up_ms,
             threads: description.threads,
             horizons_ms: description.horizons_ms.clone(),
             windowing: description.windowing.clone(),
