@@ -75,3 +75,28 @@ fn run_with_the_bundled_model_reports_inference_and_scores() {
     );
     assert!(summary["scores"]["precision"].is_number());
 }
+
+#[test]
+fn a_640x480_recording_runs_with_the_shipped_640x480_export_by_default() {
+    let recording = evgate_e2e::workspace_root().join("../shared/data/real/evt2_640x480.raw");
+    let mut run = Process::start(
+        &evgate(),
+        &[
+            "run",
+            "--input",
+            recording.to_str().unwrap(),
+            "--json",
+            "--status-interval-ms",
+            "50",
+        ],
+    )
+    .unwrap();
+    let summary = run.summary(TIMEOUT).unwrap();
+    assert_eq!(summary["ended-by"], "end-of-stream");
+    assert_eq!(summary["balanced"], true);
+    assert_eq!(u64_at(&summary, "/stats/input-events"), 521_252);
+    let infer = &summary["services"]["evgate-infer"];
+    let model = infer["model"].as_str().unwrap();
+    assert!(model.ends_with("models/evgate-S-640x480.onnx"), "{model}");
+    assert!(u64_at(&summary, "/services/evgate-infer/forecasts-published") > 0);
+}

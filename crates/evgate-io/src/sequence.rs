@@ -210,6 +210,23 @@ impl LabelledSequence {
         Ok(())
     }
 
+    /// Whether `path` is a labelled sequence: an `.npz` holding per-event labels
+    /// (`events_label`). Other `.npz` files (EVIMO recordings) are for the decoders.
+    pub fn is_labelled_sequence(path: impl AsRef<Path>) -> bool {
+        let path = path.as_ref();
+        path.extension().is_some_and(|ext| ext == "npz")
+            && NpzReader::open(path)
+                .map(|archive| archive.contains("events_label"))
+                .unwrap_or(false)
+    }
+
+    /// The sensor size of the sequence at `path`, read without its events and frames.
+    pub fn read_sensor_size(path: impl AsRef<Path>) -> Result<SensorSize, SequenceError> {
+        let path = path.as_ref();
+        let (_, resolution) = NpzReader::open(path)?.read_typed::<i64>("resolution", &[Some(2)])?;
+        sensor_size_from(path, &resolution)
+    }
+
     /// Reads and checks a sequence: every key present with the documented dtype and a shape
     /// consistent with the others.
     pub fn read(path: impl AsRef<Path>) -> Result<Self, SequenceError> {
@@ -361,6 +378,11 @@ mod tests {
         sequence.write(&path).unwrap();
         let back = LabelledSequence::read(&path).unwrap();
         assert_eq!(back, sequence);
+        assert!(LabelledSequence::is_labelled_sequence(&path));
+        assert_eq!(
+            LabelledSequence::read_sensor_size(&path).unwrap(),
+            sequence.sensor_size
+        );
         assert_eq!(
             back.future_mask_frame(1, 1),
             sequence.future_mask_frame(1, 1)
@@ -397,6 +419,7 @@ mod tests {
             err.contains("broken.npz") && err.contains("`events_xy`") && err.contains("(2, 2)"),
             "{err}"
         );
+        assert!(!LabelledSequence::is_labelled_sequence(&path), "no labels");
 
         let mut out = NpzWriter::create(&path, NpzCompression::Stored).unwrap();
         out.add("resolution", &[2], &[5i32, 3]).unwrap();

@@ -4,6 +4,7 @@
 //! when the source has them.
 
 mod children;
+mod default_model;
 mod scoring;
 
 use std::path::PathBuf;
@@ -58,9 +59,12 @@ pub struct RunArgs {
     /// stops after this much wall-clock time (the whole file when not given).
     #[arg(long)]
     duration: Option<f64>,
-    /// Exported network the inference runs.
-    #[arg(long, default_value = "models/evgate-S.onnx")]
-    model: PathBuf,
+    /// Exported network the inference runs; default: the shipped export for the source's
+    /// sensor size, models/evgate-S.onnx (sensors padding to 352×272, such as 346×260) or
+    /// models/evgate-S-640x480.onnx (640×480), looked for under the current directory and the
+    /// executable's.
+    #[arg(long)]
+    model: Option<PathBuf>,
     /// Execution provider of the inference service: cpu, cuda (falls back to cpu with a
     /// warning when CUDA cannot be used) or auto.
     #[arg(long, default_value = "cpu")]
@@ -137,12 +141,21 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             POLICIES.join(", ")
         );
     }
-    if !args.no_infer && !args.model.is_file() {
-        bail!(
-            "model {} not found: export one (models/training) or pass --model, or run with --no-infer",
-            args.model.display()
-        );
-    }
+    let model = match (&args.model, args.no_infer) {
+        (_, true) => None,
+        (Some(model), false) if model.is_file() => Some(model.clone()),
+        (Some(model), false) => bail!(
+            "model {} not found: export one (models/training) or pass another --model, or run \
+             with --no-infer",
+            model.display()
+        ),
+        (None, false) => {
+            let sensor = default_model::source_sensor(args.input.as_deref(), &args.preset)?;
+            let mut search_from: Vec<PathBuf> = std::env::current_dir().into_iter().collect();
+            search_from.extend(binary_directory());
+            Some(default_model::shipped_model_for(sensor, &search_from)?)
+        }
+    };
     let domain = args
         .domain
         .clone()
@@ -179,11 +192,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         "--json".to_owned(),
     ]);
     let mut services = vec![Service::start(&directory, "evgate-gate", &gate_args)?];
-    if !args.no_infer {
+    if let Some(model) = &model {
         let mut infer_args = common.clone();
         infer_args.extend([
             "--model".to_owned(),
-            args.model.display().to_string(),
+            model.display().to_string(),
             "--provider".to_owned(),
             args.provider.to_string(),
             "--exit-at-end".to_owned(),

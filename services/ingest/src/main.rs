@@ -155,7 +155,7 @@ fn validate(args: &Args) -> anyhow::Result<()> {
 
 fn open_source(args: &Args) -> anyhow::Result<(Box<dyn EventSource>, String)> {
     match &args.input {
-        Some(path) if is_labelled_sequence(path) => {
+        Some(path) if evgate_io::LabelledSequence::is_labelled_sequence(path) => {
             let source = InMemory::labelled_sequence(path)?;
             Ok((
                 Box::new(source),
@@ -179,15 +179,6 @@ fn open_source(args: &Args) -> anyhow::Result<(Box<dyn EventSource>, String)> {
             ))
         }
     }
-}
-
-/// A labelled-sequence `.npz` carries per-event labels (`events_label`); other `.npz` files
-/// (EVIMO recordings) go to the decoders.
-fn is_labelled_sequence(path: &std::path::Path) -> bool {
-    path.extension().is_some_and(|ext| ext == "npz")
-        && evgate_io::npz::NpzReader::open(path)
-            .map(|archive| archive.contains("events_label"))
-            .unwrap_or(false)
 }
 
 /// An id that differs between runs, so readers notice a restarted ingest.
