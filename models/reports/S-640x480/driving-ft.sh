@@ -4,9 +4,12 @@
 # (seeds 130000-130007, 3 s each), run 8's recipe, 400 steps.
 set -e
 cd "$(dirname "$0")/../../.."
+link() { mkdir -p "data/lease-driving/train/$2"; ln -sf "$(realpath "$1")" "data/lease-driving/train/$2/sequence.npz"; }
+for sequence in data/lease/train/*/; do link "$sequence/sequence.npz" "$(basename "$sequence")"; done
+link data/suite-v4/train/driving-106000/sequence.npz driving-106000
 for s in 130000 130001 130002 130003 130004 130005 130006 130007; do
-  mkdir -p data/lease-driving/train/driving-$s
-  ln -sf $(realpath data/driving-train/driving-$s/sequence.npz) data/lease-driving/train/driving-$s/sequence.npz
+  target/release/evgate sim --preset driving --seed $s --duration-s 3 --out data/driving-train/driving-$s
+  link data/driving-train/driving-$s/sequence.npz driving-$s
 done
 cd models/training
 .venv/bin/python -m evgate_train.manifest --data ../../data/lease-driving/train --output ../../data/lease-driving/manifest.json
