@@ -24,8 +24,6 @@ pub struct BoundState {
     sets: [[Tensor<f32>; STATE_COUNT]; 2],
     /// The set holding the last successful run's states; `None` means zero states.
     latest: Option<usize>,
-    /// The set the run being prepared writes.
-    target: usize,
     host_memory: MemoryInfo<'static>,
 }
 
@@ -62,7 +60,6 @@ impl BoundState {
             binding: session.create_binding()?,
             sets,
             latest: None,
-            target: 0,
             host_memory,
         })
     }
@@ -82,10 +79,6 @@ impl BoundState {
     ) -> ort::Result<&IoBinding> {
         self.binding.bind_input(INPUT_VOXEL, voxel)?;
         self.binding.bind_input(INPUT_HORIZONS, horizons)?;
-        self.target = match self.latest {
-            Some(latest) => 1 - latest,
-            None => 0,
-        };
         for stage in 0..STATE_COUNT {
             let source = match self.latest {
                 Some(latest) => &self.sets[latest][stage],
@@ -93,14 +86,8 @@ impl BoundState {
             };
             self.binding.bind_input(INPUT_STATES[stage], source)?;
         }
-        let [target_set, _] = match self.target {
-            0 => self.sets.each_mut(),
-            _ => {
-                let [first, second] = self.sets.each_mut();
-                [second, first]
-            }
-        };
-        for (stage, tensor) in target_set.iter_mut().enumerate() {
+        let target = self.target();
+        for (stage, tensor) in self.sets[target].iter_mut().enumerate() {
             self.binding.bind_output(OUTPUT_STATES[stage], tensor)?;
         }
         // Rebound every run: an output left bound keeps its buffer, whose shape is wrong once
@@ -114,6 +101,11 @@ impl BoundState {
 
     /// Makes the states the run just wrote the next run's inputs.
     pub fn commit(&mut self) {
-        self.latest = Some(self.target);
+        self.latest = Some(self.target());
+    }
+
+    /// The set the next run writes: the one the last run did not.
+    fn target(&self) -> usize {
+        self.latest.map_or(0, |latest| 1 - latest)
     }
 }
