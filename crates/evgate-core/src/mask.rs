@@ -166,18 +166,10 @@ impl BitMask {
             let mut blocks = row[..width].chunks_exact(32);
             for block in &mut blocks {
                 let block: &[f32; 32] = block.try_into().expect("chunks_exact gives 32");
-                let mut bits = 0u64;
-                for (bit, &logit) in block.iter().enumerate() {
-                    bits |= u64::from(logit > threshold_logit) << bit;
-                }
-                writer.push(bits, 32);
+                writer.push(bits_above(block, threshold_logit), 32);
             }
             let rest = blocks.remainder();
-            let mut bits = 0u64;
-            for (bit, &logit) in rest.iter().enumerate() {
-                bits |= u64::from(logit > threshold_logit) << bit;
-            }
-            writer.push(bits, rest.len() as u32);
+            writer.push(bits_above(rest, threshold_logit), rest.len() as u32);
         }
         writer.finish();
         Ok(())
@@ -232,6 +224,15 @@ impl BitMask {
     pub fn count_ones(&self) -> usize {
         self.view().count_ones()
     }
+}
+
+/// Bit i set when `logits[i] > threshold_logit` (NaN never), for up to 64 logits. Inlined, so
+/// that a fixed-size block compiles to vector compares.
+#[inline(always)]
+fn bits_above(logits: &[f32], threshold_logit: f32) -> u64 {
+    logits.iter().enumerate().fold(0, |bits, (bit, &logit)| {
+        bits | u64::from(logit > threshold_logit) << bit
+    })
 }
 
 /// Appends runs of up to 32 bits to consecutive words, least significant bit first.
