@@ -13,7 +13,7 @@ if [ -e "$dest/libonnxruntime.so" ] && [ "$(cat "$dest/VERSION" 2>/dev/null)" = 
 fi
 rm -rf "$dest" && mkdir -p "$dest/wheel"
 echo "onnxruntime: downloading $package==$version from PyPI" >&2
-python3 -m pip download --quiet --no-deps --only-binary=:all: -d "$dest/wheel" "$package==$version"
+python3 -m pip download --quiet --no-cache-dir --no-deps --only-binary=:all: -d "$dest/wheel" "$package==$version"
 wheel=$(ls "$dest"/wheel/*.whl)
 python3 - "$wheel" "$dest" <<'PY'
 import sys, zipfile, os

@@ -5,6 +5,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Disk is what a fresh machine runs short of (torch with its CUDA libraries, the test build):
+# say how much there is, so a failure for space reads as such.
+df -h . "${TMPDIR:-/tmp}" | sed 's/^/disk: /'
 bash scripts/fetch-onnxruntime.sh
 bash models/training/setup.sh
 bash scripts/setup-hdf5.sh
