@@ -22,6 +22,7 @@ pub mod camera;
 pub mod config;
 pub mod esim;
 pub mod event_model;
+pub mod event_sort;
 pub mod linalg;
 pub mod motion;
 pub mod noise;

@@ -831,6 +831,27 @@ impl<'a> Snapshot<'a> {
 
     /// What the ray through pixel centre (x, y) hits.
     pub fn trace(&self, x: f32, y: f32) -> Hit {
+        let (direction, nearest_depth, nearest_panel) = self.nearest_panel_along(x, y);
+        self.complete_hit(
+            x,
+            direction,
+            nearest_depth,
+            nearest_panel,
+            &self.all_objects,
+        )
+    }
+
+    /// Where the ray through pixel (`x`, `y`) meets the static world (the point
+    /// [`Snapshot::trace`] reports where no object is nearer), without shading it: what the
+    /// motion probe needs, at a fraction of the cost.
+    pub fn static_point(&self, x: f32, y: f32) -> Option<Vec3> {
+        let (direction, depth, panel) = self.nearest_panel_along(x, y);
+        panel.map(|_| self.camera.translation + direction * depth)
+    }
+
+    /// The ray direction through pixel (`x`, `y`), and the depth and index of the nearest
+    /// panel along it (infinity and `None` where there is none).
+    fn nearest_panel_along(&self, x: f32, y: f32) -> (Vec3, f32, Option<usize>) {
         let scene = self.scene;
         let direction = self.camera.rotation.apply(scene.intrinsics.ray(x, y));
         let origin = self.camera.translation;
@@ -856,13 +877,7 @@ impl<'a> Snapshot<'a> {
             nearest_depth = distance;
             nearest_panel = Some(i);
         }
-        self.complete_hit(
-            x,
-            direction,
-            nearest_depth,
-            nearest_panel,
-            &self.all_objects,
-        )
+        (direction, nearest_depth, nearest_panel)
     }
 
     /// Finishes a ray in `direction` through column `x` whose nearest static surface is

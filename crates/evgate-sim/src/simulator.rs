@@ -22,6 +22,7 @@ use serde::Serialize;
 use crate::camera::{project_world, Intrinsics};
 use crate::config::SimConfig;
 use crate::esim::{LabelledEvent, PixelBand, PixelState};
+use crate::event_sort::EventSorter;
 use crate::noise::NoiseSource;
 use crate::preset::Preset;
 use crate::render::{Frame, RowScratch, Snapshot};
@@ -101,9 +102,10 @@ pub struct Simulator {
     next_background: Frame,
     rendered_us: i64,
     delivered_us: i64,
-    /// The last step's events, each band's sorted but not yet merged: the next step merges
-    /// them into `pending` while its helpers render, or `advance` before it delivers.
+    /// The last step's events, unsorted: the next step sorts them into `pending` while its
+    /// helpers render, or `advance` before it delivers.
     unsorted: Vec<LabelledEvent>,
+    sorter: EventSorter,
     /// The static world's step from `rendered_us`, sized during the step before (by its main
     /// thread, while the helpers render).
     next_static_step_us: Option<i64>,
@@ -194,6 +196,7 @@ impl Simulator {
             rendered_us: 0,
             delivered_us: 0,
             unsorted: Vec::new(),
+            sorter: EventSorter::default(),
             next_static_step_us: None,
             pending: VecDeque::new(),
             threads,
@@ -254,6 +257,7 @@ impl Simulator {
         }
         deliver(
             &mut self.unsorted,
+            &mut self.sorter,
             &mut self.pending,
             t_end_us,
             out,
@@ -334,25 +338,24 @@ impl Simulator {
                 while let Some(slot) = queue.get(next_band.fetch_add(1, Ordering::Relaxed)) {
                     let job = slot.lock().unwrap_or_else(PoisonError::into_inner).take();
                     if let Some(job) = job {
-                        let first = out.len();
                         job.run(interval, &mut scratch, &mut out);
-                        // Sorted here, in parallel, each band's events leave the step's final
-                        // sort (below) little more than merging runs; a stable sort within a
-                        // band keeps the final order exactly what it would be without.
-                        out[first..].sort_by_key(event_order);
                     }
                 }
                 out
             };
-            let (unsorted, pending, stats) =
-                (&mut self.unsorted, &mut self.pending, &mut self.stats);
+            let (unsorted, sorter, pending, stats) = (
+                &mut self.unsorted,
+                &mut self.sorter,
+                &mut self.pending,
+                &mut self.stats,
+            );
             let (scene, config) = (&self.scene, &self.config);
             let next_static_step_us = &mut self.next_static_step_us;
             std::thread::scope(|scope| {
                 let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
                 // The previous step's merge and the next step's motion probe, which would
                 // leave the helpers idle between steps, overlap their rendering of this one.
-                deliver(unsorted, pending, t_end_us, out, stats);
+                deliver(unsorted, sorter, pending, t_end_us, out, stats);
                 *next_static_step_us = Some(Simulator::static_step_us(scene, config, t1));
                 events = run_all();
                 for helper in helpers {
@@ -401,9 +404,8 @@ impl Simulator {
         for y in (MOTION_PROBE_GRID_PX / 2..sensor.height as usize).step_by(MOTION_PROBE_GRID_PX) {
             for x in (MOTION_PROBE_GRID_PX / 2..sensor.width as usize).step_by(MOTION_PROBE_GRID_PX)
             {
-                let hit = now.trace(x as f32, y as f32);
-                if hit.depth.is_finite() {
-                    if let Some(b) = project_world(k, later.camera(), hit.point) {
+                if let Some(point) = now.static_point(x as f32, y as f32) {
+                    if let Some(b) = project_world(k, later.camera(), point) {
                         max_shift = max_shift.max(shift((x as f32, y as f32), b));
                     }
                 }
@@ -509,19 +511,19 @@ impl Simulator {
     }
 }
 
-/// Sorts a step's `events` (a concatenation of sorted runs), which follow those in `pending`,
-/// and moves them on: those due by `t_end_us` straight to `out` where nothing is pending
-/// (rather than through the queue), the others to `pending`. Time, then row and column: the
-/// order does not depend on how rows were shared out (a stable sort keeps one pixel's events in
-/// the order it produced them).
+/// Sorts a step's `events`, which follow those in `pending`, and moves them on: those due by
+/// `t_end_us` straight to `out` where nothing is pending (rather than through the queue), the
+/// others to `pending`. Time, then row and column: the order does not depend on how rows were
+/// shared out (a stable sort keeps one pixel's events in the order it produced them).
 fn deliver(
     events: &mut Vec<LabelledEvent>,
+    sorter: &mut EventSorter,
     pending: &mut VecDeque<LabelledEvent>,
     t_end_us: i64,
     out: &mut Vec<LabelledEvent>,
     stats: &mut SimStats,
 ) {
-    events.sort_by_key(event_order);
+    sorter.sort(events);
     let due = if pending.is_empty() {
         events.partition_point(|labelled| labelled.event.t <= t_end_us)
     } else {
@@ -531,11 +533,6 @@ fn deliver(
     out.extend_from_slice(&events[..due]);
     pending.extend(events.drain(due..));
     events.clear();
-}
-
-/// The order of the delivered events: time, then row and column.
-fn event_order(labelled: &LabelledEvent) -> (i64, u16, u16) {
-    (labelled.event.t, labelled.event.y, labelled.event.x)
 }
 
 fn shift(a: (f32, f32), b: (f32, f32)) -> f32 {
