@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use evgate_core::{Event, SensorSize};
 use half::f16;
 
+use crate::npy::NpyArray;
 use crate::npz::{NpzCompression, NpzError, NpzReader, NpzWriter};
 
 #[derive(Debug, thiserror::Error)]
@@ -188,24 +189,48 @@ impl LabelledSequence {
             self.ref_ts.len(),
             self.horizons_per_reference,
         );
-        let mut out = NpzWriter::create(path, compression)?;
         let times: Vec<i64> = self.events.iter().map(|e| e.t).collect();
-        out.add("events_t", &[n], &times)?;
         let xy: Vec<u16> = self.events.iter().flat_map(|e| [e.x, e.y]).collect();
-        out.add("events_xy", &[n, 2], &xy)?;
         let polarity: Vec<u8> = self.events.iter().map(|e| e.is_on() as u8).collect();
-        out.add("events_p", &[n], &polarity)?;
-        out.add("events_label", &[n], &self.labels)?;
-        out.add("resolution", &[2], &[w as i64, h as i64])?;
-        out.add("K", &[3, 3], self.intrinsics.as_flattened())?;
-        out.add("gt_ts", &[f], &self.gt_ts)?;
-        out.add("mask", &[f, h, w], &self.masks)?;
-        out.add("depth", &[f, h, w], &to_f16(&self.depth))?;
-        out.add("ref_ts", &[r], &self.ref_ts)?;
-        out.add("horizon_us", &[r, k], &self.horizon_us)?;
-        out.add("future_mask", &[r, k, h, w], &self.future_mask)?;
-        out.add("future_flow", &[r, k, h, w, 2], &to_f16(&self.future_flow))?;
-        out.add("meta", &[self.meta.len()], self.meta.as_bytes())?;
+        let arrays = [
+            ("events_t", NpyArray::from_slice(&[n], &times)),
+            ("events_xy", NpyArray::from_slice(&[n, 2], &xy)),
+            ("events_p", NpyArray::from_slice(&[n], &polarity)),
+            ("events_label", NpyArray::from_slice(&[n], &self.labels)),
+            (
+                "resolution",
+                NpyArray::from_slice(&[2], &[w as i64, h as i64]),
+            ),
+            (
+                "K",
+                NpyArray::from_slice(&[3, 3], self.intrinsics.as_flattened()),
+            ),
+            ("gt_ts", NpyArray::from_slice(&[f], &self.gt_ts)),
+            ("mask", NpyArray::from_slice(&[f, h, w], &self.masks)),
+            (
+                "depth",
+                NpyArray::from_slice(&[f, h, w], &to_f16(&self.depth)),
+            ),
+            ("ref_ts", NpyArray::from_slice(&[r], &self.ref_ts)),
+            (
+                "horizon_us",
+                NpyArray::from_slice(&[r, k], &self.horizon_us),
+            ),
+            (
+                "future_mask",
+                NpyArray::from_slice(&[r, k, h, w], &self.future_mask),
+            ),
+            (
+                "future_flow",
+                NpyArray::from_slice(&[r, k, h, w, 2], &to_f16(&self.future_flow)),
+            ),
+            (
+                "meta",
+                NpyArray::from_slice(&[self.meta.len()], self.meta.as_bytes()),
+            ),
+        ];
+        let mut out = NpzWriter::create(path, compression)?;
+        out.add_arrays(&arrays)?;
         out.finish()?;
         Ok(())
     }

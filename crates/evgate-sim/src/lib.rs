@@ -42,5 +42,5 @@ pub use event_model::EventModel;
 pub use preset::{Preset, UnknownPreset};
 pub use render::Frame;
 pub use sequence::{simulate_sequence, SequenceOptions};
-pub use simulator::{SimStats, Simulator, SimulatorError};
+pub use simulator::{SimStats, Simulator, SimulatorError, Surfaces};
 pub use suite::{suite_plan, Split, SuiteEntry, SuiteScale, SUITE_VERSION};

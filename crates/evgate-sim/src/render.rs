@@ -43,6 +43,16 @@ pub struct Hit {
     pub log_intensity: f32,
 }
 
+/// A [`Hit`] without its shading: what the ground truth (masks, depth, flow) needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Located {
+    /// 0 = static world, k = moving object k.
+    pub surface: u16,
+    /// As [`Hit::point`].
+    pub point: Vec3,
+    pub depth: f32,
+}
+
 /// Where every surface is at one instant, plus screen-space bounds used to skip rays that
 /// cannot hit a finite surface.
 pub struct Snapshot<'a> {
@@ -344,10 +354,30 @@ impl<'a> Snapshot<'a> {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe { self.render_rows_avx2(first_row, log_intensity, surface, depth, scratch) };
+            unsafe {
+                self.render_rows_avx2::<true>(first_row, log_intensity, surface, depth, scratch)
+            };
             return;
         }
-        self.render_rows_portable::<false>(first_row, log_intensity, surface, depth, scratch);
+        self.render_rows_portable::<false, true>(first_row, log_intensity, surface, depth, scratch);
+    }
+
+    /// The surface ids and depths of [`Snapshot::render_rows`], bit for bit, without shading
+    /// (the texture lookups are most of a render's cost).
+    pub fn locate_rows(
+        &self,
+        first_row: usize,
+        surface: &mut [u16],
+        depth: &mut [f32],
+        scratch: &mut RowScratch,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe { self.render_rows_avx2::<false>(first_row, &mut [], surface, depth, scratch) };
+            return;
+        }
+        self.render_rows_portable::<false, false>(first_row, &mut [], surface, depth, scratch);
     }
 
     /// [`Snapshot::render_rows_portable`] compiled for AVX2, whose 8-lane vectors double the
@@ -356,7 +386,7 @@ impl<'a> Snapshot<'a> {
     /// portable build: the output is the same bit for bit.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn render_rows_avx2(
+    unsafe fn render_rows_avx2<const SHADE: bool>(
         &self,
         first_row: usize,
         log_intensity: &mut [f32],
@@ -364,12 +394,13 @@ impl<'a> Snapshot<'a> {
         depth: &mut [f32],
         scratch: &mut RowScratch,
     ) {
-        self.render_rows_portable::<true>(first_row, log_intensity, surface, depth, scratch);
+        self.render_rows_portable::<true, SHADE>(first_row, log_intensity, surface, depth, scratch);
     }
 
-    /// With `GATHER`, only for callers compiled for AVX2 on a CPU that has it.
+    /// With `GATHER`, only for callers compiled for AVX2 on a CPU that has it. Without
+    /// `SHADE`, `log_intensity` is not touched (and may be empty).
     #[inline(always)]
-    fn render_rows_portable<const GATHER: bool>(
+    fn render_rows_portable<const GATHER: bool, const SHADE: bool>(
         &self,
         first_row: usize,
         log_intensity: &mut [f32],
@@ -378,12 +409,14 @@ impl<'a> Snapshot<'a> {
         scratch: &mut RowScratch,
     ) {
         let width = self.scene.sensor.width as usize;
-        let rows = log_intensity.len() / width;
+        let rows = surface.len() / width;
         for row in 0..rows {
             let y = (first_row + row) as f32;
             let pixels = row * width..(row + 1) * width;
             self.nearest_panels(y, 0..width, scratch);
-            self.shade_panels::<GATHER>(scratch, &mut log_intensity[pixels.clone()]);
+            if SHADE {
+                self.shade_panels::<GATHER>(scratch, &mut log_intensity[pixels.clone()]);
+            }
             surface[pixels.clone()].fill(0);
             depth[pixels.clone()].copy_from_slice(&scratch.nearest_depth[..width]);
             scratch.active_objects.clear();
@@ -411,17 +444,21 @@ impl<'a> Snapshot<'a> {
                     let i = pixels.start + column;
                     surface[i] = hit.id;
                     depth[i] = hit.depth;
-                    if batch.push(i, self.material_texel(&hit.material, direction, hit.depth)) {
+                    if SHADE
+                        && batch.push(i, self.material_texel(&hit.material, direction, hit.depth))
+                    {
                         batch.shade_into(self.scene, log_intensity);
                     }
                 }
             }
-            batch.shade_into(self.scene, log_intensity);
+            if SHADE {
+                batch.shade_into(self.scene, log_intensity);
+            }
         }
     }
 
     /// Log intensity of the nearest panel along each ray of the row searched by
-    /// [`Snapshot::nearest_panels`] (dark where there is none): what `complete_hit` and
+    /// [`Snapshot::nearest_panels`] (dark where there is none): what `nearest_surface` and
     /// `shade` compute, pixel by pixel without the objects.
     #[inline(always)]
     fn shade_panels<const GATHER: bool>(&self, scratch: &RowScratch, log_intensity: &mut [f32]) {
@@ -573,7 +610,7 @@ impl<'a> Snapshot<'a> {
     }
 
     /// Where the ray of column `c` (searched by [`Snapshot::nearest_panels`]) meets its
-    /// nearest panel, in texture terms: what `complete_hit` and `shade` compute.
+    /// nearest panel, in texture terms: what `nearest_surface` and `shade` compute.
     #[inline(always)]
     fn panel_texel(&self, scratch: &RowScratch, c: usize) -> Option<PanelTexel> {
         let i = scratch.nearest_panel[c];
@@ -637,11 +674,12 @@ impl<'a> Snapshot<'a> {
                     continue;
                 }
                 let local = start - columns.start..end - columns.start;
-                if !self.plane_behind(i, &scratch.directions, local.clone()) {
+                let in_front = self.columns_in_front(i, &scratch.directions, local);
+                if !in_front.is_empty() {
                     scratch.row_panels.push(RowPanel {
                         index: i,
-                        start: local.start,
-                        end: local.end,
+                        start: in_front.start,
+                        end: in_front.end,
                     });
                 }
             }
@@ -654,17 +692,47 @@ impl<'a> Snapshot<'a> {
         );
     }
 
-    /// Whether the rays `directions[columns]` of one row all meet panel `i`'s plane behind
-    /// the camera (or never), so that none can hit the panel. `n·d` is linear along a row:
-    /// where it has the same sign at both ends, clear of zero, it has that sign throughout,
-    /// and the distance `offset / n·d` is negative when the signs of offset and `n·d` differ.
+    /// The part of `columns` (non-empty, of one row) whose rays may meet panel `i`'s plane in
+    /// front of the camera: the others cannot hit the panel. `n·d` is linear along a row, so
+    /// its sign changes at most once, and the distance `offset / n·d` is negative where the
+    /// signs of offset and `n·d` differ. Columns next to the change are kept, as are all where
+    /// `n·d` is near zero at an end or changes too slowly to place the change: there rounding
+    /// could flip a sign. A room's walls each face only part of a row; their other part was
+    /// tested pixel by pixel for nothing.
     #[inline(always)]
-    fn plane_behind(&self, i: usize, directions: &RowDirections, columns: Range<usize>) -> bool {
+    fn columns_in_front(
+        &self,
+        i: usize,
+        directions: &RowDirections,
+        columns: Range<usize>,
+    ) -> Range<usize> {
+        /// Columns kept beyond the computed sign change, far more than its error (below
+        /// 0.1 column with the slopes accepted).
+        const MARGIN: usize = 2;
         let plane = &self.panel_planes[i];
-        let first = plane.normal.dot(directions.at(columns.start));
-        let last = plane.normal.dot(directions.at(columns.end - 1));
-        let clear = first.abs() > 1e-4 && last.abs() > 1e-4;
-        clear && plane.offset * first < 0.0 && plane.offset * last < 0.0
+        let (start, last_column) = (columns.start, columns.end - 1);
+        let first = plane.normal.dot(directions.at(start));
+        let last = plane.normal.dot(directions.at(last_column));
+        if !(first.abs() > 1e-4 && last.abs() > 1e-4) {
+            return columns;
+        }
+        let behind = |dot: f32| plane.offset * dot < 0.0;
+        match (behind(first), behind(last)) {
+            (false, false) => columns,
+            (true, true) => start..start,
+            (first_behind, _) => {
+                let span = (last_column - start) as f32;
+                if (last - first).abs() / span < 1e-5 {
+                    return columns;
+                }
+                let change = start as f32 + span * first / (first - last);
+                if first_behind {
+                    (change.floor() as usize).saturating_sub(MARGIN).max(start)..columns.end
+                } else {
+                    start..(change.ceil() as usize + MARGIN).min(columns.end)
+                }
+            }
+        }
     }
 
     /// Draws the moving objects over `columns` of row `row`, whose static-world log intensity
@@ -832,13 +900,34 @@ impl<'a> Snapshot<'a> {
     /// What the ray through pixel centre (x, y) hits.
     pub fn trace(&self, x: f32, y: f32) -> Hit {
         let (direction, nearest_depth, nearest_panel) = self.nearest_panel_along(x, y);
-        self.complete_hit(
+        let (located, material) = self.nearest_surface(
+            x,
+            direction,
+            nearest_depth,
+            nearest_panel,
+            &self.all_objects,
+        );
+        Hit {
+            surface: located.surface,
+            point: located.point,
+            depth: located.depth,
+            log_intensity: material.map_or(LOG_DARK, |material| {
+                self.shade(&material, direction, located.depth)
+            }),
+        }
+    }
+
+    /// [`Snapshot::trace`] without the shading.
+    pub fn locate(&self, x: f32, y: f32) -> Located {
+        let (direction, nearest_depth, nearest_panel) = self.nearest_panel_along(x, y);
+        self.nearest_surface(
             x,
             direction,
             nearest_depth,
             nearest_panel,
             &self.all_objects,
         )
+        .0
     }
 
     /// Where the ray through pixel (`x`, `y`) meets the static world (the point
@@ -882,22 +971,21 @@ impl<'a> Snapshot<'a> {
 
     /// Finishes a ray in `direction` through column `x` whose nearest static surface is
     /// `panel` at `panel_depth`: tests the moving objects (those listed in `objects`) and
-    /// shades the nearest surface.
-    fn complete_hit(
+    /// returns the nearest surface with its material (none where nothing is hit).
+    fn nearest_surface(
         &self,
         x: f32,
         direction: Vec3,
         panel_depth: f32,
         panel: Option<usize>,
         objects: &[usize],
-    ) -> Hit {
+    ) -> (Located, Option<Material>) {
         let scene = self.scene;
         let origin = self.camera.translation;
-        let mut best = Hit {
+        let mut best = Located {
             surface: 0,
             point: Vec3::default(),
             depth: panel_depth,
-            log_intensity: LOG_DARK,
         };
         let mut best_material = panel.map(|i| {
             let panel = &scene.panels[i];
@@ -918,10 +1006,7 @@ impl<'a> Snapshot<'a> {
             best.depth = hit.depth;
             best_material = Some(hit.material);
         }
-        if let Some(material) = best_material {
-            best.log_intensity = self.shade(&material, direction, best.depth);
-        }
-        best
+        (best, best_material)
     }
 
     /// The nearest of the moving objects listed in `objects` that the ray in `direction`
@@ -1195,7 +1280,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     #[test]
-    fn rendering_whole_rows_matches_tracing_each_pixel_bit_for_bit() {
+    fn rendering_whole_rows_and_locating_match_tracing_each_pixel_bit_for_bit() {
         for preset in [Preset::Boxes, Preset::Table, Preset::Driving] {
             let config = preset.config().at_reduced_resolution(4);
             let scene = build_scene(&config, &mut ChaCha8Rng::seed_from_u64(4));
@@ -1209,10 +1294,31 @@ mod tests {
                     &mut frame.surface,
                     &mut frame.depth,
                 );
+                let (mut surface, mut depth) = (vec![0; width * height], vec![0.0; width * height]);
+                snapshot.locate_rows(0, &mut surface, &mut depth, &mut snapshot.row_scratch());
+                let static_world = Snapshot::static_world(&scene, t_s);
                 for y in 0..height {
                     for x in 0..width {
                         let hit = snapshot.trace(x as f32, y as f32);
                         let i = y * width + x;
+                        // Ground truth located without shading: the same surfaces and points.
+                        let located = snapshot.locate(x as f32, y as f32);
+                        assert_eq!(
+                            (located.surface, located.point, located.depth.to_bits()),
+                            (hit.surface, hit.point, hit.depth.to_bits())
+                        );
+                        assert_eq!(
+                            (surface[i], depth[i].to_bits()),
+                            (hit.surface, hit.depth.to_bits())
+                        );
+                        let behind_objects = static_world.trace(x as f32, y as f32);
+                        assert_eq!(
+                            static_world.static_point(x as f32, y as f32),
+                            behind_objects
+                                .depth
+                                .is_finite()
+                                .then_some(behind_objects.point)
+                        );
                         assert_eq!(
                             (
                                 frame.log_intensity[i].to_bits(),

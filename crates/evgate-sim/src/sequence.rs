@@ -117,9 +117,9 @@ pub fn simulate_sequence(
     let mut masks = Vec::with_capacity(gt_ts.len() * pixels);
     let mut depth = Vec::with_capacity(gt_ts.len() * pixels);
     for &t in &gt_ts {
-        let frame = simulator.frame_at(t);
-        masks.extend(frame.surface.iter().map(|&id| id as u8));
-        depth.extend_from_slice(&frame.depth);
+        let surfaces = simulator.surfaces_at(t);
+        masks.extend(surfaces.id.iter().map(|&id| id as u8));
+        depth.extend_from_slice(&surfaces.depth);
         report_gt(&mut gt_done, progress);
     }
     let mut future_mask = Vec::with_capacity(ref_ts.len() * k * pixels);

@@ -459,14 +459,41 @@ impl Simulator {
         frame
     }
 
+    /// The surface ids and depths of [`Simulator::frame_at`] (bit for bit), without its
+    /// shading, which ground truth does not need.
+    pub fn surfaces_at(&self, t_us: i64) -> Surfaces {
+        let sensor = self.config.sensor;
+        let mut surfaces = Surfaces {
+            id: vec![0; sensor.pixels()],
+            depth: vec![0.0; sensor.pixels()],
+        };
+        let snapshot = Snapshot::new(&self.scene, t_us as f32 * 1e-6);
+        let width = sensor.width as usize;
+        let chunk = width * (sensor.height as usize).div_ceil(self.threads.max(1));
+        std::thread::scope(|scope| {
+            for (i, (id, depth)) in surfaces
+                .id
+                .chunks_mut(chunk)
+                .zip(surfaces.depth.chunks_mut(chunk))
+                .enumerate()
+            {
+                let snapshot = &snapshot;
+                scope.spawn(move || {
+                    snapshot.locate_rows(i * chunk / width, id, depth, &mut snapshot.row_scratch())
+                });
+            }
+        });
+        surfaces
+    }
+
     /// Object id per pixel at `t_us` (0 = static world).
     pub fn mask_at(&self, t_us: i64) -> Vec<u16> {
-        self.frame_at(t_us).surface
+        self.surfaces_at(t_us).id
     }
 
     /// Depth in metres per pixel at `t_us` (`f32::INFINITY` where no surface is hit).
     pub fn depth_at(&self, t_us: i64) -> Vec<f32> {
-        self.frame_at(t_us).depth
+        self.surfaces_at(t_us).depth
     }
 
     /// Forward optical flow (dx, dy) in pixels from `t_us` to `t_us + horizon_us`, defined at
@@ -489,7 +516,7 @@ impl Simulator {
                             (i % width) as f32,
                             (band * rows_per_band + i / width) as f32,
                         );
-                        let hit = now.trace(x, y);
+                        let hit = now.locate(x, y);
                         let world = if hit.surface == 0 {
                             hit.point
                         } else {
@@ -509,6 +536,15 @@ impl Simulator {
         });
         flow
     }
+}
+
+/// What each pixel sees at one instant, without its intensity.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Surfaces {
+    /// 0 = static world, k = moving object k.
+    pub id: Vec<u16>,
+    /// Metres along the ray (`f32::INFINITY` where no surface is hit).
+    pub depth: Vec<f32>,
 }
 
 /// Sorts a step's `events`, which follow those in `pending`, and moves them on: those due by
