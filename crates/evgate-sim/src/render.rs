@@ -111,6 +111,8 @@ struct PlanePlacement {
 struct PlacedObject {
     pose: RigidTransform,
     inverse_rotation: Mat3,
+    /// The camera centre in the object's frame: the origin of every ray there.
+    local_camera: Vec3,
     bounds: ScreenBounds,
     /// `1 / texel-m`, once per object rather than per pixel.
     texels_per_m: f32,
@@ -267,6 +269,10 @@ impl<'a> Snapshot<'a> {
                 PlacedObject {
                     pose,
                     inverse_rotation: pose.rotation.transpose(),
+                    local_camera: pose
+                        .rotation
+                        .transpose()
+                        .apply(camera.translation - pose.translation),
                     bounds: ScreenBounds::of_points(scene, &camera, corners.into_iter()),
                     texels_per_m: 1.0 / object.texel_m,
                 }
@@ -1019,7 +1025,6 @@ impl<'a> Snapshot<'a> {
         objects: &[usize],
     ) -> Option<ObjectHit> {
         let scene = self.scene;
-        let origin = self.camera.translation;
         let mut best: Option<ObjectHit> = None;
         let mut best_depth = depth_limit;
         for &i in objects {
@@ -1028,9 +1033,7 @@ impl<'a> Snapshot<'a> {
                 continue;
             }
             let object = &scene.objects[i];
-            let local_origin = placed
-                .inverse_rotation
-                .apply(origin - placed.pose.translation);
+            let local_origin = placed.local_camera;
             let local_direction = placed.inverse_rotation.apply(direction);
             let Some(local_hit) = intersect_shape(&object.shape, local_origin, local_direction)
             else {
