@@ -113,6 +113,9 @@ struct PlacedObject {
     inverse_rotation: Mat3,
     /// The camera centre in the object's frame: the origin of every ray there.
     local_camera: Vec3,
+    /// The light on faces normal to each local axis (either side: the same bits, as
+    /// [`log_illumination`] depends on the normal's sign only through an absolute value).
+    log_illumination: [f32; 3],
     bounds: ScreenBounds,
     /// `1 / texel-m`, once per object rather than per pixel.
     texels_per_m: f32,
@@ -273,6 +276,12 @@ impl<'a> Snapshot<'a> {
                         .rotation
                         .transpose()
                         .apply(camera.translation - pose.translation),
+                    log_illumination: [
+                        Vec3::new(1.0, 0.0, 0.0),
+                        Vec3::new(0.0, 1.0, 0.0),
+                        Vec3::new(0.0, 0.0, 1.0),
+                    ]
+                    .map(|axis| log_illumination(scene, pose.rotation.apply(axis))),
                     bounds: ScreenBounds::of_points(scene, &camera, corners.into_iter()),
                     texels_per_m: 1.0 / object.texel_m,
                 }
@@ -1054,7 +1063,7 @@ impl<'a> Snapshot<'a> {
                     u: local_hit.u,
                     v: local_hit.v,
                     normal,
-                    log_illumination: log_illumination(scene, normal),
+                    log_illumination: placed.log_illumination[local_hit.axis],
                 },
             });
         }
@@ -1195,7 +1204,9 @@ struct LocalHit {
     distance: f32,
     u: f32,
     v: f32,
+    /// ± the unit vector of local axis `axis`.
     normal: Vec3,
+    axis: usize,
 }
 
 fn intersect_shape(shape: &Shape, origin: Vec3, direction: Vec3) -> Option<LocalHit> {
@@ -1213,6 +1224,7 @@ fn intersect_shape(shape: &Shape, origin: Vec3, direction: Vec3) -> Option<Local
                 u: p.x,
                 v: p.y,
                 normal: Vec3::new(0.0, 0.0, 1.0),
+                axis: 2,
             })
         }
     }
@@ -1271,6 +1283,7 @@ fn intersect_cuboid(half: Vec3, origin: Vec3, direction: Vec3) -> Option<LocalHi
         u: u + face_offset,
         v: v + face_offset,
         normal,
+        axis: near_axis,
     })
 }
 
