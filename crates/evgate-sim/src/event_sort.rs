@@ -25,33 +25,38 @@ pub struct EventSorter {
 }
 
 impl EventSorter {
-    /// The same result as `events.sort_by_key(event_order)`.
-    pub fn sort(&mut self, events: &mut Vec<LabelledEvent>) {
+    /// The events of `parts`, concatenated in order, sorted as
+    /// `concatenation.sort_by_key(event_order)` sorts them; valid until the next call.
+    pub fn sort_parts(&mut self, parts: &[Vec<LabelledEvent>]) -> &[LabelledEvent] {
+        let events = || parts.iter().flatten();
+        let count = parts.iter().map(Vec::len).sum::<usize>();
+        self.sorted.clear();
         let (Some(first), Some(last)) = (
-            events.iter().map(|e| e.event.t).min(),
-            events.iter().map(|e| e.event.t).max(),
+            events().map(|e| e.event.t).min(),
+            events().map(|e| e.event.t).max(),
         ) else {
-            return;
+            return &self.sorted;
         };
         let span = last.abs_diff(first);
         // Sparse spans (noise alone, long steps with few events) cost more to count than to
         // compare.
-        if events.len() < COUNTING_MIN_EVENTS || span > 4 * events.len() as u64 + 1024 {
-            events.sort_by_key(event_order);
-            return;
+        if count < COUNTING_MIN_EVENTS || span > 4 * count as u64 + 1024 {
+            self.sorted.extend(events());
+            self.sorted.sort_by_key(event_order);
+            return &self.sorted;
         }
         let offset = |labelled: &LabelledEvent| labelled.event.t.abs_diff(first) as usize;
         self.slots.clear();
         self.slots.resize(span as usize + 2, 0);
-        for labelled in events.iter() {
+        for labelled in events() {
             self.slots[offset(labelled) + 1] += 1;
         }
         for i in 1..self.slots.len() {
             self.slots[i] += self.slots[i - 1];
         }
-        self.sorted.clear();
-        self.sorted.resize(events.len(), events[0]);
-        for labelled in events.iter() {
+        let placeholder = *events().next().expect("count > 0");
+        self.sorted.resize(count, placeholder);
+        for labelled in events() {
             let slot = &mut self.slots[offset(labelled)];
             self.sorted[*slot as usize] = *labelled;
             *slot += 1;
@@ -70,7 +75,7 @@ impl EventSorter {
             }
             start = end;
         }
-        std::mem::swap(events, &mut self.sorted);
+        &self.sorted
     }
 }
 
@@ -96,6 +101,7 @@ mod tests {
                 (0i64..3000, 0u16..6, 0u16..5, any::<bool>(), 0u16..4), 0..1500),
             base in -5_000_000i64..5_000_000,
             stretch in prop::sample::select(vec![1i64, 1000]),
+            split_at in any::<prop::sample::Index>(),
         ) {
             let events: Vec<LabelledEvent> = raw
                 .iter()
@@ -103,17 +109,17 @@ mod tests {
                 .collect();
             let mut expected = events.clone();
             expected.sort_by_key(event_order);
+            // Split anywhere: the parts' order is the tie-break, as a concatenation's.
+            let split = split_at.index(events.len() + 1);
+            let parts = [events[..split].to_vec(), Vec::new(), events[split..].to_vec()];
             let mut sorter = EventSorter::default();
-            let mut sorted = events.clone();
-            sorter.sort(&mut sorted);
-            prop_assert_eq!(&sorted, &expected);
+            prop_assert_eq!(sorter.sort_parts(&parts), &expected[..]);
             // Buffers reused by a second call give the same.
             let mut again = events;
             again.reverse();
             expected = again.clone();
             expected.sort_by_key(event_order);
-            sorter.sort(&mut again);
-            prop_assert_eq!(again, expected);
+            prop_assert_eq!(sorter.sort_parts(&[again]), &expected[..]);
         }
     }
 
@@ -126,7 +132,6 @@ mod tests {
         events.extend((0..100).map(|i| labelled(i, 0, 0, true, 2)));
         let mut expected = events.clone();
         expected.sort_by_key(event_order);
-        EventSorter::default().sort(&mut events);
-        assert_eq!(events, expected);
+        assert_eq!(EventSorter::default().sort_parts(&[events]), &expected[..]);
     }
 }

@@ -102,10 +102,14 @@ pub struct Simulator {
     next_background: Frame,
     rendered_us: i64,
     delivered_us: i64,
-    /// The last step's events, unsorted: the next step sorts them into `pending` while its
-    /// helpers render, or `advance` before it delivers.
-    unsorted: Vec<LabelledEvent>,
+    /// The last step's events, unsorted, in parts (one per worker, then the noise): the next
+    /// step sorts them into `pending` while its helpers render, or `advance` before it
+    /// delivers.
+    unsorted: Vec<Vec<LabelledEvent>>,
     sorter: EventSorter,
+    /// Emptied event buffers, kept with their capacity: allocated afresh every step, they
+    /// cost page faults (large allocations come straight from the kernel).
+    spare_buffers: Mutex<Vec<Vec<LabelledEvent>>>,
     /// The static world's step from `rendered_us`, sized during the step before (by its main
     /// thread, while the helpers render).
     next_static_step_us: Option<i64>,
@@ -197,6 +201,7 @@ impl Simulator {
             delivered_us: 0,
             unsorted: Vec::new(),
             sorter: EventSorter::default(),
+            spare_buffers: Mutex::new(Vec::new()),
             next_static_step_us: None,
             pending: VecDeque::new(),
             threads,
@@ -258,6 +263,7 @@ impl Simulator {
         deliver(
             &mut self.unsorted,
             &mut self.sorter,
+            &self.spare_buffers,
             &mut self.pending,
             t_end_us,
             out,
@@ -301,7 +307,7 @@ impl Simulator {
             refractory_us: self.config.events.refractory_us,
         };
         let rows_per_band = height.div_ceil(self.threads * BANDS_PER_THREAD);
-        let mut events = Vec::new();
+        let mut parts = Vec::with_capacity(self.threads + 1);
         {
             let bands = self.state.bands(width, rows_per_band);
             let chunk = width * rows_per_band;
@@ -332,8 +338,16 @@ impl Simulator {
             let next_band = AtomicUsize::new(0);
             let interval = &interval;
             let (queue, next_band) = (&queue, &next_band);
+            let spare_buffers = &self.spare_buffers;
+            let take_buffer = move || {
+                spare_buffers
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .pop()
+                    .unwrap_or_default()
+            };
             let run_all = move || {
-                let mut out = Vec::new();
+                let mut out = take_buffer();
                 let mut scratch = interval.background.row_scratch();
                 while let Some(slot) = queue.get(next_band.fetch_add(1, Ordering::Relaxed)) {
                     let job = slot.lock().unwrap_or_else(PoisonError::into_inner).take();
@@ -355,26 +369,36 @@ impl Simulator {
                 let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
                 // The previous step's merge and the next step's motion probe, which would
                 // leave the helpers idle between steps, overlap their rendering of this one.
-                deliver(unsorted, sorter, pending, t_end_us, out, stats);
+                deliver(
+                    unsorted,
+                    sorter,
+                    spare_buffers,
+                    pending,
+                    t_end_us,
+                    out,
+                    stats,
+                );
                 *next_static_step_us = Some(Simulator::static_step_us(scene, config, t1));
-                events = run_all();
+                parts.push(run_all());
                 for helper in helpers {
-                    events.extend(
+                    parts.push(
                         helper
                             .join()
                             .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
                     );
                 }
             });
+            parts.push(take_buffer());
         }
         std::mem::swap(
             &mut self.background,
             &mut self.next_background.log_intensity,
         );
         let refractory = self.config.events.refractory_us;
+        let noise = parts.last_mut().expect("the noise part");
         self.noise
-            .emit(t1, refractory, &mut self.state, &mut self.rng, &mut events);
-        self.unsorted = events;
+            .emit(t1, refractory, &mut self.state, &mut self.rng, noise);
+        self.unsorted = parts;
         self.rendered_us = t1;
         self.stats.renders += interval.samples.len() as u64 - 1;
         self.stats.background_renders += 1;
@@ -547,19 +571,21 @@ pub struct Surfaces {
     pub depth: Vec<f32>,
 }
 
-/// Sorts a step's `events`, which follow those in `pending`, and moves them on: those due by
-/// `t_end_us` straight to `out` where nothing is pending (rather than through the queue), the
-/// others to `pending`. Time, then row and column: the order does not depend on how rows were
-/// shared out (a stable sort keeps one pixel's events in the order it produced them).
+/// Sorts a step's events (`parts`, which follow those in `pending`) and moves them on: those
+/// due by `t_end_us` straight to `out` where nothing is pending (rather than through the
+/// queue), the others to `pending`; the emptied parts go to `spare_buffers`. Time, then row and
+/// column: the order does not depend on how rows were shared out (a stable sort keeps one
+/// pixel's events in the order it produced them, and a pixel's noise after them).
 fn deliver(
-    events: &mut Vec<LabelledEvent>,
+    parts: &mut Vec<Vec<LabelledEvent>>,
     sorter: &mut EventSorter,
+    spare_buffers: &Mutex<Vec<Vec<LabelledEvent>>>,
     pending: &mut VecDeque<LabelledEvent>,
     t_end_us: i64,
     out: &mut Vec<LabelledEvent>,
     stats: &mut SimStats,
 ) {
-    sorter.sort(events);
+    let events = sorter.sort_parts(parts);
     let due = if pending.is_empty() {
         events.partition_point(|labelled| labelled.event.t <= t_end_us)
     } else {
@@ -567,8 +593,12 @@ fn deliver(
     };
     stats.record(&events[..due]);
     out.extend_from_slice(&events[..due]);
-    pending.extend(events.drain(due..));
-    events.clear();
+    pending.extend(events[due..].iter().copied());
+    let mut spare = spare_buffers.lock().unwrap_or_else(PoisonError::into_inner);
+    for mut part in parts.drain(..) {
+        part.clear();
+        spare.push(part);
+    }
 }
 
 fn shift(a: (f32, f32), b: (f32, f32)) -> f32 {
