@@ -5,7 +5,6 @@ use std::io::{BufReader, BufWriter, Cursor, Read, Seek, Write};
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Mutex, PoisonError};
 
 use crate::npy::{NpyArray, NpyElement, NpyError};
 
@@ -217,26 +216,34 @@ impl<W: Write + Seek> NpzWriter<W> {
         let mut order: Vec<usize> = (0..arrays.len()).collect();
         order.sort_by_key(|&i| std::cmp::Reverse(arrays[i].1.data.len()));
         let next = AtomicUsize::new(0);
-        let members: Vec<Mutex<Option<Result<Vec<u8>, NpzError>>>> =
-            arrays.iter().map(|_| Mutex::new(None)).collect();
         let (path, compression) = (&self.path, self.compression);
+        let mut members: Vec<Option<Result<Vec<u8>, NpzError>>> =
+            arrays.iter().map(|_| None).collect();
         std::thread::scope(|scope| {
-            for _ in 0..threads {
-                scope.spawn(|| {
-                    while let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
-                        let (key, array) = &arrays[i];
-                        let compressed = single_member_archive(path, compression, key, array);
-                        *members[i].lock().unwrap_or_else(PoisonError::into_inner) =
-                            Some(compressed);
-                    }
-                });
+            let workers: Vec<_> = (0..threads)
+                .map(|_| {
+                    scope.spawn(|| {
+                        let mut compressed = Vec::new();
+                        while let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
+                            let (key, array) = &arrays[i];
+                            compressed
+                                .push((i, single_member_archive(path, compression, key, array)));
+                        }
+                        compressed
+                    })
+                })
+                .collect();
+            for worker in workers {
+                let compressed = worker
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+                for (i, member) in compressed {
+                    members[i] = Some(member);
+                }
             }
         });
         for member in members {
-            let archive = member
-                .into_inner()
-                .unwrap_or_else(PoisonError::into_inner)
-                .expect("every member is compressed before the scope ends")?;
+            let archive = member.expect("every member is compressed before the scope ends")?;
             let archive =
                 zip::ZipArchive::new(Cursor::new(archive)).map_err(|source| NpzError::Zip {
                     path: self.path.clone(),
