@@ -370,11 +370,55 @@ impl<'a> Snapshot<'a> {
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
             unsafe {
-                self.render_rows_avx2::<true>(first_row, log_intensity, surface, depth, scratch)
+                self.render_rows_avx2::<true, true>(
+                    first_row,
+                    log_intensity,
+                    surface,
+                    depth,
+                    scratch,
+                )
             };
             return;
         }
-        self.render_rows_portable::<false, true>(first_row, log_intensity, surface, depth, scratch);
+        self.render_rows_portable::<false, true, true>(
+            first_row,
+            log_intensity,
+            surface,
+            depth,
+            scratch,
+        );
+    }
+
+    /// The log intensity of [`Snapshot::render_rows`], bit for bit, without writing surface
+    /// ids and depths: the static world's renders need only the intensity, and each frame's
+    /// needless writes cost memory bandwidth, which limits the simulator.
+    pub fn shade_rows(
+        &self,
+        first_row: usize,
+        log_intensity: &mut [f32],
+        scratch: &mut RowScratch,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe {
+                self.render_rows_avx2::<true, false>(
+                    first_row,
+                    log_intensity,
+                    &mut [],
+                    &mut [],
+                    scratch,
+                )
+            };
+            return;
+        }
+        self.render_rows_portable::<false, true, false>(
+            first_row,
+            log_intensity,
+            &mut [],
+            &mut [],
+            scratch,
+        );
     }
 
     /// The surface ids and depths of [`Snapshot::render_rows`], bit for bit, without shading
@@ -389,10 +433,18 @@ impl<'a> Snapshot<'a> {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe { self.render_rows_avx2::<false>(first_row, &mut [], surface, depth, scratch) };
+            unsafe {
+                self.render_rows_avx2::<false, true>(first_row, &mut [], surface, depth, scratch)
+            };
             return;
         }
-        self.render_rows_portable::<false, false>(first_row, &mut [], surface, depth, scratch);
+        self.render_rows_portable::<false, false, true>(
+            first_row,
+            &mut [],
+            surface,
+            depth,
+            scratch,
+        );
     }
 
     /// [`Snapshot::render_rows_portable`] compiled for AVX2, whose 8-lane vectors double the
@@ -401,7 +453,7 @@ impl<'a> Snapshot<'a> {
     /// portable build: the output is the same bit for bit.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn render_rows_avx2<const SHADE: bool>(
+    unsafe fn render_rows_avx2<const SHADE: bool, const LOCATE: bool>(
         &self,
         first_row: usize,
         log_intensity: &mut [f32],
@@ -409,13 +461,20 @@ impl<'a> Snapshot<'a> {
         depth: &mut [f32],
         scratch: &mut RowScratch,
     ) {
-        self.render_rows_portable::<true, SHADE>(first_row, log_intensity, surface, depth, scratch);
+        self.render_rows_portable::<true, SHADE, LOCATE>(
+            first_row,
+            log_intensity,
+            surface,
+            depth,
+            scratch,
+        );
     }
 
     /// With `GATHER`, only for callers compiled for AVX2 on a CPU that has it. Without
-    /// `SHADE`, `log_intensity` is not touched (and may be empty).
+    /// `SHADE`, `log_intensity` is not touched (and may be empty); without `LOCATE`, neither
+    /// are `surface` and `depth`.
     #[inline(always)]
-    fn render_rows_portable<const GATHER: bool, const SHADE: bool>(
+    fn render_rows_portable<const GATHER: bool, const SHADE: bool, const LOCATE: bool>(
         &self,
         first_row: usize,
         log_intensity: &mut [f32],
@@ -424,7 +483,11 @@ impl<'a> Snapshot<'a> {
         scratch: &mut RowScratch,
     ) {
         let width = self.scene.sensor.width as usize;
-        let rows = surface.len() / width;
+        let rows = if LOCATE {
+            surface.len()
+        } else {
+            log_intensity.len()
+        } / width;
         for row in 0..rows {
             let y = (first_row + row) as f32;
             let pixels = row * width..(row + 1) * width;
@@ -432,8 +495,10 @@ impl<'a> Snapshot<'a> {
             if SHADE {
                 self.shade_panels::<GATHER>(scratch, &mut log_intensity[pixels.clone()]);
             }
-            surface[pixels.clone()].fill(0);
-            depth[pixels.clone()].copy_from_slice(&scratch.nearest_depth[..width]);
+            if LOCATE {
+                surface[pixels.clone()].fill(0);
+                depth[pixels.clone()].copy_from_slice(&scratch.nearest_depth[..width]);
+            }
             scratch.active_objects.clear();
             scratch.active_objects.extend(
                 (0..self.objects.len()).filter(|&i| self.objects[i].bounds.contains_row(y)),
@@ -457,8 +522,10 @@ impl<'a> Snapshot<'a> {
                     &scratch.active_objects,
                 ) {
                     let i = pixels.start + column;
-                    surface[i] = hit.id;
-                    depth[i] = hit.depth;
+                    if LOCATE {
+                        surface[i] = hit.id;
+                        depth[i] = hit.depth;
+                    }
                     if SHADE
                         && batch.push(i, self.material_texel(&hit.material, direction, hit.depth))
                     {
@@ -1312,6 +1379,12 @@ mod tests {
                 );
                 let (mut surface, mut depth) = (vec![0; width * height], vec![0.0; width * height]);
                 snapshot.locate_rows(0, &mut surface, &mut depth, &mut snapshot.row_scratch());
+                let mut shaded = vec![0.0f32; width * height];
+                snapshot.shade_rows(0, &mut shaded, &mut snapshot.row_scratch());
+                assert!(shaded
+                    .iter()
+                    .zip(&frame.log_intensity)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()));
                 let static_world = Snapshot::static_world(&scene, t_s);
                 for y in 0..height {
                     for x in 0..width {

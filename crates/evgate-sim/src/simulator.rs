@@ -98,8 +98,8 @@ pub struct Simulator {
     noise: NoiseSource,
     /// The static world's log intensity at `rendered_us`.
     background: Vec<f32>,
-    /// The static world's next render (log intensity, surface and depth buffers).
-    next_background: Frame,
+    /// The static world's next render (its log intensity).
+    next_background: Vec<f32>,
     rendered_us: i64,
     delivered_us: i64,
     /// The last step's events, unsorted, in parts (one per worker, then the noise): the next
@@ -196,7 +196,7 @@ impl Simulator {
             state,
             noise,
             background: frame.log_intensity.clone(),
-            next_background: frame,
+            next_background: frame.log_intensity,
             rendered_us: 0,
             delivered_us: 0,
             unsorted: Vec::new(),
@@ -311,25 +311,18 @@ impl Simulator {
         {
             let bands = self.state.bands(width, rows_per_band);
             let chunk = width * rows_per_band;
-            let next = &mut self.next_background;
             let jobs = self
                 .background
                 .chunks(chunk)
-                .zip(next.log_intensity.chunks_mut(chunk))
-                .zip(next.surface.chunks_mut(chunk))
-                .zip(next.depth.chunks_mut(chunk))
+                .zip(self.next_background.chunks_mut(chunk))
                 .zip(bands)
                 .enumerate()
-                .map(
-                    |(i, ((((background, next_background), surface), depth), band))| BandJob {
-                        first_row: i * rows_per_band,
-                        background,
-                        next_background,
-                        surface,
-                        depth,
-                        band,
-                    },
-                );
+                .map(|(i, ((background, next_background), band))| BandJob {
+                    first_row: i * rows_per_band,
+                    background,
+                    next_background,
+                    band,
+                });
             // Workers take the next band as they finish one, so that a worker with costlier
             // rows (objects, near floors) or less CPU (a shared machine) holds the step up
             // less than with bands dealt out in advance.
@@ -390,10 +383,7 @@ impl Simulator {
             });
             parts.push(take_buffer());
         }
-        std::mem::swap(
-            &mut self.background,
-            &mut self.next_background.log_intensity,
-        );
+        std::mem::swap(&mut self.background, &mut self.next_background);
         let refractory = self.config.events.refractory_us;
         let noise = parts.last_mut().expect("the noise part");
         self.noise
@@ -643,8 +633,6 @@ struct BandJob<'a> {
     /// The static world at the step's start, and its render at the end (written here).
     background: &'a [f32],
     next_background: &'a mut [f32],
-    surface: &'a mut [u16],
-    depth: &'a mut [f32],
     band: PixelBand<'a>,
 }
 
@@ -655,13 +643,9 @@ impl BandJob<'_> {
         scratch: &mut RowScratch,
         out: &mut Vec<LabelledEvent>,
     ) {
-        interval.background.render_rows_with(
-            self.first_row,
-            self.next_background,
-            self.surface,
-            self.depth,
-            scratch,
-        );
+        interval
+            .background
+            .shade_rows(self.first_row, self.next_background, scratch);
         let width = interval.width;
         let rows = self.background.len() / width;
         let refractory = interval.refractory_us;
