@@ -360,7 +360,7 @@ impl Simulator {
             let next_static_step_us = &mut self.next_static_step_us;
             std::thread::scope(|scope| {
                 let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
-                // The previous step's merge and the next step's motion probe, which would
+                // The previous step's sort and the next step's motion probe, which would
                 // leave the helpers idle between steps, overlap their rendering of this one.
                 deliver(
                     unsorted,
