@@ -8,6 +8,11 @@ cd "$(dirname "$0")/.."
 # Disk is what a fresh machine runs short of (torch with its CUDA libraries, the test build):
 # say how much there is, so a failure for space reads as such.
 df -h . "${TMPDIR:-/tmp}" | sed 's/^/disk: /'
+free_kb=$(df -Pk . 2>/dev/null | awk 'NR == 2 { print $4 }' || true)
+if [ -n "$free_kb" ] && [ ! -d models/training/.venv ] && [ "$free_kb" -lt $((10 * 1024 * 1024)) ]; then
+  echo "disk: warning: $((free_kb / 1024 / 1024)) GB free here; a first run needs about 10 GB" \
+    "(the training environment 4.7 GB, the Rust test build 4-5 GB)" >&2
+fi
 bash scripts/fetch-onnxruntime.sh
 bash models/training/setup.sh
 bash scripts/setup-hdf5.sh
