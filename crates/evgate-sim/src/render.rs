@@ -333,23 +333,6 @@ impl<'a> Snapshot<'a> {
     }
 
     /// Renders rows `first_row..first_row + rows` into the given row-major slices.
-    pub fn render_rows(
-        &self,
-        first_row: usize,
-        log_intensity: &mut [f32],
-        surface: &mut [u16],
-        depth: &mut [f32],
-    ) {
-        self.render_rows_with(
-            first_row,
-            log_intensity,
-            surface,
-            depth,
-            &mut self.row_scratch(),
-        );
-    }
-
-    /// [`Snapshot::render_rows`] with the caller's buffers.
     ///
     /// A row is rendered in passes over its columns: the panels are searched panel after
     /// panel, then the texture coordinates and footprint of every panel hit are computed, in
@@ -358,34 +341,19 @@ impl<'a> Snapshot<'a> {
     /// batches of eight. Every pixel still sees the same
     /// operations in the same order as [`Snapshot::trace`], so the output is bit-identical to
     /// tracing pixel by pixel.
-    pub fn render_rows_with(
+    pub fn render_rows(
         &self,
         first_row: usize,
         log_intensity: &mut [f32],
         surface: &mut [u16],
         depth: &mut [f32],
-        scratch: &mut RowScratch,
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe {
-                self.render_rows_avx2::<true, true>(
-                    first_row,
-                    log_intensity,
-                    surface,
-                    depth,
-                    scratch,
-                )
-            };
-            return;
-        }
-        self.render_rows_portable::<false, true, true>(
+        self.render_rows_where_supported::<true, true>(
             first_row,
             log_intensity,
             surface,
             depth,
-            scratch,
+            &mut self.row_scratch(),
         );
     }
 
@@ -398,21 +366,7 @@ impl<'a> Snapshot<'a> {
         log_intensity: &mut [f32],
         scratch: &mut RowScratch,
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe {
-                self.render_rows_avx2::<true, false>(
-                    first_row,
-                    log_intensity,
-                    &mut [],
-                    &mut [],
-                    scratch,
-                )
-            };
-            return;
-        }
-        self.render_rows_portable::<false, true, false>(
+        self.render_rows_where_supported::<true, false>(
             first_row,
             log_intensity,
             &mut [],
@@ -430,17 +384,41 @@ impl<'a> Snapshot<'a> {
         depth: &mut [f32],
         scratch: &mut RowScratch,
     ) {
+        self.render_rows_where_supported::<false, true>(
+            first_row,
+            &mut [],
+            surface,
+            depth,
+            scratch,
+        );
+    }
+
+    /// [`Snapshot::render_rows_portable`] in its AVX2 build where the CPU has AVX2.
+    fn render_rows_where_supported<const SHADE: bool, const LOCATE: bool>(
+        &self,
+        first_row: usize,
+        log_intensity: &mut [f32],
+        surface: &mut [u16],
+        depth: &mut [f32],
+        scratch: &mut RowScratch,
+    ) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
             unsafe {
-                self.render_rows_avx2::<false, true>(first_row, &mut [], surface, depth, scratch)
+                self.render_rows_avx2::<SHADE, LOCATE>(
+                    first_row,
+                    log_intensity,
+                    surface,
+                    depth,
+                    scratch,
+                )
             };
             return;
         }
-        self.render_rows_portable::<false, false, true>(
+        self.render_rows_portable::<false, SHADE, LOCATE>(
             first_row,
-            &mut [],
+            log_intensity,
             surface,
             depth,
             scratch,
