@@ -884,6 +884,74 @@ impl<'a> Snapshot<'a> {
         let nearest_panel = &mut nearest_panel[..n];
         let origin = self.camera.translation;
         let blocks = n / LANES * LANES;
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe {
+                self.nearest_in_blocks_avx2(
+                    directions,
+                    panels,
+                    &mut nearest_depth[..blocks],
+                    &mut nearest_panel[..blocks],
+                )
+            };
+        } else {
+            self.nearest_in_blocks(
+                directions,
+                panels,
+                &mut nearest_depth[..blocks],
+                &mut nearest_panel[..blocks],
+            );
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        self.nearest_in_blocks(
+            directions,
+            panels,
+            &mut nearest_depth[..blocks],
+            &mut nearest_panel[..blocks],
+        );
+        for c in blocks..n {
+            let direction = Vec3::new(xs[c], ys[c], zs[c]);
+            let (mut depth, mut id) = (f32::INFINITY, NO_PANEL);
+            for row_panel in panels {
+                if c < row_panel.start || c >= row_panel.end {
+                    continue;
+                }
+                let i = row_panel.index;
+                let plane = &self.panel_planes[i];
+                let distance = plane.offset / plane.normal.dot(direction);
+                let panel = &self.scene.panels[i];
+                let inside = match panel.half_extent {
+                    None => true,
+                    Some((hu, hv)) => {
+                        let relative = origin + direction * distance - panel.origin;
+                        !((relative.dot(panel.axis_u).abs() > hu)
+                            | (relative.dot(panel.axis_v).abs() > hv))
+                    }
+                };
+                if (distance > 1e-3) & (distance < depth) & inside {
+                    depth = distance;
+                    id = i as u32;
+                }
+            }
+            nearest_depth[c] = depth;
+            nearest_panel[c] = id;
+        }
+    }
+
+    /// [`Snapshot::nearest_on_panels`] for whole blocks of [`LANES`] columns
+    /// (`nearest_depth.len()` a multiple of it).
+    #[inline(always)]
+    fn nearest_in_blocks(
+        &self,
+        directions: &RowDirections,
+        panels: &[RowPanel],
+        nearest_depth: &mut [f32],
+        nearest_panel: &mut [u32],
+    ) {
+        let blocks = nearest_depth.len();
+        let (xs, ys, zs) = (&directions.x, &directions.y, &directions.z);
+        let origin = self.camera.translation;
         for start in (0..blocks).step_by(LANES) {
             let block = start..start + LANES;
             let (bx, by, bz) = (&xs[block.clone()], &ys[block.clone()], &zs[block.clone()]);
@@ -928,32 +996,114 @@ impl<'a> Snapshot<'a> {
             nearest_depth[block.clone()].copy_from_slice(&depth);
             nearest_panel[block].copy_from_slice(&id);
         }
-        for c in blocks..n {
-            let direction = Vec3::new(xs[c], ys[c], zs[c]);
-            let (mut depth, mut id) = (f32::INFINITY, NO_PANEL);
+    }
+
+    /// [`Snapshot::nearest_in_blocks`] in AVX2 intrinsics: the same operations in the same
+    /// order (hence the same bits), with the lanes' column tests and selections as vector
+    /// compares and blends, which the compiler did not find (it built the masks byte by byte).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn nearest_in_blocks_avx2(
+        &self,
+        directions: &RowDirections,
+        panels: &[RowPanel],
+        nearest_depth: &mut [f32],
+        nearest_panel: &mut [u32],
+    ) {
+        use std::arch::x86_64::*;
+        let blocks = nearest_depth.len();
+        assert!(
+            blocks.is_multiple_of(LANES)
+                && directions.x.len() >= blocks
+                && directions.y.len() >= blocks
+                && directions.z.len() >= blocks
+                && nearest_panel.len() == blocks
+        );
+        let origin = self.camera.translation;
+        let lane_offsets = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let sign = _mm256_set1_ps(-0.0);
+        let near_limit = _mm256_set1_ps(1e-3);
+        for start in (0..blocks).step_by(LANES) {
+            let end = start + LANES;
+            // SAFETY (loads and stores): `start..end` lies within every slice (asserted).
+            let dx = _mm256_loadu_ps(directions.x.as_ptr().add(start));
+            let dy = _mm256_loadu_ps(directions.y.as_ptr().add(start));
+            let dz = _mm256_loadu_ps(directions.z.as_ptr().add(start));
+            let columns = _mm256_add_epi32(_mm256_set1_epi32(start as i32), lane_offsets);
+            let mut depth = _mm256_set1_ps(f32::INFINITY);
+            let mut id = _mm256_set1_epi32(NO_PANEL as i32);
             for row_panel in panels {
-                if c < row_panel.start || c >= row_panel.end {
+                if row_panel.end <= start || row_panel.start >= end {
                     continue;
                 }
                 let i = row_panel.index;
                 let plane = &self.panel_planes[i];
-                let distance = plane.offset / plane.normal.dot(direction);
+                let normal = plane.normal;
+                let along_normal = _mm256_add_ps(
+                    _mm256_add_ps(
+                        _mm256_mul_ps(_mm256_set1_ps(normal.x), dx),
+                        _mm256_mul_ps(_mm256_set1_ps(normal.y), dy),
+                    ),
+                    _mm256_mul_ps(_mm256_set1_ps(normal.z), dz),
+                );
+                let distance = _mm256_div_ps(_mm256_set1_ps(plane.offset), along_normal);
+                // Columns are below 2^31: the panel's range as signed compares.
+                let mut eligible = _mm256_andnot_si256(
+                    _mm256_cmpgt_epi32(_mm256_set1_epi32(row_panel.start as i32), columns),
+                    _mm256_cmpgt_epi32(_mm256_set1_epi32(row_panel.end as i32), columns),
+                );
                 let panel = &self.scene.panels[i];
-                let inside = match panel.half_extent {
-                    None => true,
-                    Some((hu, hv)) => {
-                        let relative = origin + direction * distance - panel.origin;
-                        !((relative.dot(panel.axis_u).abs() > hu)
-                            | (relative.dot(panel.axis_v).abs() > hv))
-                    }
-                };
-                if (distance > 1e-3) & (distance < depth) & inside {
-                    depth = distance;
-                    id = i as u32;
+                if let Some((hu, hv)) = panel.half_extent {
+                    let relative = |origin: f32, direction: __m256, panel_origin: f32| {
+                        _mm256_sub_ps(
+                            _mm256_add_ps(
+                                _mm256_set1_ps(origin),
+                                _mm256_mul_ps(direction, distance),
+                            ),
+                            _mm256_set1_ps(panel_origin),
+                        )
+                    };
+                    let (rx, ry, rz) = (
+                        relative(origin.x, dx, panel.origin.x),
+                        relative(origin.y, dy, panel.origin.y),
+                        relative(origin.z, dz, panel.origin.z),
+                    );
+                    let outside = |axis: Vec3, half: f32| {
+                        let along = _mm256_add_ps(
+                            _mm256_add_ps(
+                                _mm256_mul_ps(rx, _mm256_set1_ps(axis.x)),
+                                _mm256_mul_ps(ry, _mm256_set1_ps(axis.y)),
+                            ),
+                            _mm256_mul_ps(rz, _mm256_set1_ps(axis.z)),
+                        );
+                        _mm256_cmp_ps::<_CMP_GT_OQ>(
+                            _mm256_andnot_ps(sign, along),
+                            _mm256_set1_ps(half),
+                        )
+                    };
+                    let outside =
+                        _mm256_or_ps(outside(panel.axis_u, hu), outside(panel.axis_v, hv));
+                    eligible = _mm256_andnot_si256(_mm256_castps_si256(outside), eligible);
                 }
+                let closer = _mm256_and_ps(
+                    _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_GT_OQ>(distance, near_limit),
+                        _mm256_cmp_ps::<_CMP_LT_OQ>(distance, depth),
+                    ),
+                    _mm256_castsi256_ps(eligible),
+                );
+                depth = _mm256_blendv_ps(depth, distance, closer);
+                id = _mm256_castps_si256(_mm256_blendv_ps(
+                    _mm256_castsi256_ps(id),
+                    _mm256_castsi256_ps(_mm256_set1_epi32(i as i32)),
+                    closer,
+                ));
             }
-            nearest_depth[c] = depth;
-            nearest_panel[c] = id;
+            _mm256_storeu_ps(nearest_depth.as_mut_ptr().add(start), depth);
+            _mm256_storeu_si256(nearest_panel.as_mut_ptr().add(start).cast(), id);
         }
     }
 
