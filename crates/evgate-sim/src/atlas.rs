@@ -97,15 +97,46 @@ impl TextureAtlas {
         footprint: &[f32; 8],
     ) -> [f32; 8] {
         use std::arch::x86_64::*;
-        for &t in texture {
-            assert!((t as usize) < self.level_counts.len(), "texture {t}");
-        }
+        let sampled = self.sample8_lanes(
+            _mm256_loadu_si256(texture.as_ptr().cast()),
+            _mm256_loadu_ps(u.as_ptr()),
+            _mm256_loadu_ps(v.as_ptr()),
+            _mm256_loadu_ps(footprint.as_ptr()),
+        );
+        let mut out = [0.0f32; 8];
+        _mm256_storeu_ps(out.as_mut_ptr(), sampled);
+        out
+    }
+
+    /// [`TextureAtlas::sample8`] on vectors, for callers that have them in registers
+    /// (a round trip through memory per block cost a render as much as its blending).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub unsafe fn sample8_lanes(
+        &self,
+        texture: std::arch::x86_64::__m256i,
+        u: std::arch::x86_64::__m256,
+        v: std::arch::x86_64::__m256,
+        footprint: std::arch::x86_64::__m256,
+    ) -> std::arch::x86_64::__m256 {
+        use std::arch::x86_64::*;
+        let textures = self.level_counts.len() as i32;
+        let valid = _mm256_andnot_si256(
+            _mm256_cmpgt_epi32(_mm256_setzero_si256(), texture),
+            _mm256_cmpgt_epi32(_mm256_set1_epi32(textures), texture),
+        );
+        assert!(
+            _mm256_movemask_epi8(valid) == -1,
+            "texture index out of 0..{textures}"
+        );
         // Where all lanes sample one texture, its sizes are broadcast instead of gathered.
-        let uniform = texture.iter().all(|&t| t == texture[0]);
-        let first = texture[0] as usize;
-        let texture = _mm256_loadu_si256(texture.as_ptr().cast());
-        let (u, v) = (_mm256_loadu_ps(u.as_ptr()), _mm256_loadu_ps(v.as_ptr()));
-        let footprint = _mm256_loadu_ps(footprint.as_ptr());
+        let first_lane = _mm256_permutevar8x32_epi32(texture, _mm256_setzero_si256());
+        let uniform = _mm256_movemask_epi8(_mm256_cmpeq_epi32(texture, first_lane)) == -1;
+        let first = _mm256_cvtsi256_si32(texture) as usize;
         // SAFETY (all gathers and loads): every index is a valid texture (asserted above), a level
         // below its count, or a texel inside that level (masked by its size).
         let (level_counts, size_log2) = if uniform {
@@ -154,12 +185,10 @@ impl TextureAtlas {
             _mm256_andnot_ps(fine_only, _mm256_castsi256_ps(has_next)),
             blends,
         );
-        let mut out = [0.0f32; 8];
         // Where no lane blends with a coarser level (all footprints within a texel, say), its
         // gathers are skipped, as the scalar path skips the second bilinear sample.
         if _mm256_movemask_ps(use_coarser) == 0 {
-            _mm256_storeu_ps(out.as_mut_ptr(), a);
-            return out;
+            return a;
         }
         let coarser_level = _mm256_min_epi32(next, _mm256_sub_epi32(level_counts, one_i));
         let half = _mm256_set1_ps(0.5);
@@ -171,8 +200,7 @@ impl TextureAtlas {
             _mm256_mul_ps(vs, half),
         );
         let mixed = _mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), blend));
-        _mm256_storeu_ps(out.as_mut_ptr(), _mm256_blendv_ps(a, mixed, use_coarser));
-        out
+        _mm256_blendv_ps(a, mixed, use_coarser)
     }
 
     /// `Level::bilinear` of level `level` of `texture`, for eight lanes.

@@ -527,27 +527,12 @@ impl<'a> Snapshot<'a> {
         for start in (0..blocks_end).step_by(8) {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `GATHER` is set only by `render_rows_avx2`, which runs where the CPU
-            // has AVX2; the lanes' panels and textures are the scene's.
-            let (sampled, log_illumination, dark) = unsafe {
-                let texels = self.panel_texels8(scratch, start);
-                let sampled = self.scene.atlas.sample8(
-                    &texels.texture,
-                    &texels.u,
-                    &texels.v,
-                    &texels.footprint,
-                );
-                (sampled, texels.log_illumination, texels.dark)
+            // has AVX2.
+            unsafe {
+                self.shade_panels8(scratch, start, &mut log_intensity[start..start + 8])
             };
             #[cfg(not(target_arch = "x86_64"))]
-            let (sampled, log_illumination, dark): ([f32; 8], [f32; 8], [bool; 8]) =
-                unreachable!("GATHER is set only by the x86-64 AVX2 build");
-            for k in 0..8 {
-                log_intensity[start + k] = if dark[k] {
-                    LOG_DARK
-                } else {
-                    sampled[k] + log_illumination[k]
-                };
-            }
+            unreachable!("GATHER is set only by the x86-64 AVX2 build");
         }
         for (c, log) in log_intensity.iter_mut().enumerate().skip(blocks_end) {
             *log = match self.panel_texel(scratch, c) {
@@ -558,6 +543,31 @@ impl<'a> Snapshot<'a> {
                 }
             };
         }
+    }
+
+    /// [`Snapshot::shade_panels`] for columns `start..start + 8` (`log_intensity`), in vector
+    /// registers from the panels to the store.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn shade_panels8(&self, scratch: &RowScratch, start: usize, log_intensity: &mut [f32]) {
+        use std::arch::x86_64::*;
+        assert_eq!(log_intensity.len(), 8);
+        let texels = self.panel_texels8(scratch, start);
+        // SAFETY: the lanes' textures are the scene's panels' textures.
+        let sampled =
+            self.scene
+                .atlas
+                .sample8_lanes(texels.texture, texels.u, texels.v, texels.footprint);
+        let lit = _mm256_add_ps(sampled, texels.log_illumination);
+        // SAFETY: `log_intensity` has eight values (asserted).
+        _mm256_storeu_ps(
+            log_intensity.as_mut_ptr(),
+            _mm256_blendv_ps(lit, _mm256_set1_ps(LOG_DARK), texels.dark),
+        );
     }
 
     /// [`Snapshot::panel_texel`] for columns `start..start + 8` at once.
@@ -634,39 +644,22 @@ impl<'a> Snapshot<'a> {
         // Dark lanes read texel (0, 0) of the panel-0 texture at level 0; their value is
         // replaced by the dark level.
         let or_zero = |value: __m256| _mm256_andnot_ps(dark_ps, value);
-        let mut texels = PanelTexels8::default();
-        _mm256_storeu_ps(
-            texels.u.as_mut_ptr(),
-            or_zero(_mm256_mul_ps(dot(rx, ry, rz, ux, uy, uz), texels_per_m)),
-        );
-        _mm256_storeu_ps(
-            texels.v.as_mut_ptr(),
-            or_zero(_mm256_mul_ps(dot(rx, ry, rz, vx, vy, vz), texels_per_m)),
-        );
-        _mm256_storeu_ps(
-            texels.footprint.as_mut_ptr(),
-            _mm256_blendv_ps(
-                _mm256_mul_ps(metres_per_pixel, texels_per_m),
-                _mm256_set1_ps(1.0),
-                dark_ps,
-            ),
-        );
-        _mm256_storeu_ps(
-            texels.log_illumination.as_mut_ptr(),
-            gather(&lanes.log_illumination),
-        );
-        _mm256_storeu_si256(
-            texels.texture.as_mut_ptr().cast(),
-            if uniform {
+        PanelTexels8 {
+            texture: if uniform {
                 _mm256_set1_epi32(lanes.texture[first])
             } else {
                 _mm256_i32gather_epi32::<4>(lanes.texture.as_ptr(), panel)
             },
-        );
-        let mut dark_lanes = [0i32; 8];
-        _mm256_storeu_si256(dark_lanes.as_mut_ptr().cast(), dark);
-        texels.dark = dark_lanes.map(|lane| lane != 0);
-        texels
+            u: or_zero(_mm256_mul_ps(dot(rx, ry, rz, ux, uy, uz), texels_per_m)),
+            v: or_zero(_mm256_mul_ps(dot(rx, ry, rz, vx, vy, vz), texels_per_m)),
+            footprint: _mm256_blendv_ps(
+                _mm256_mul_ps(metres_per_pixel, texels_per_m),
+                _mm256_set1_ps(1.0),
+                dark_ps,
+            ),
+            log_illumination: gather(&lanes.log_illumination),
+            dark: dark_ps,
+        }
     }
 
     /// Where the ray of column `c` (searched by [`Snapshot::nearest_panels`]) meets its
@@ -1377,14 +1370,14 @@ struct PanelTexel {
 
 /// [`PanelTexel`] for eight columns, and which of them meet no panel.
 #[cfg(target_arch = "x86_64")]
-#[derive(Default)]
 struct PanelTexels8 {
-    texture: [i32; 8],
-    u: [f32; 8],
-    v: [f32; 8],
-    footprint: [f32; 8],
-    log_illumination: [f32; 8],
-    dark: [bool; 8],
+    texture: std::arch::x86_64::__m256i,
+    u: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+    footprint: std::arch::x86_64::__m256,
+    log_illumination: std::arch::x86_64::__m256,
+    /// All bits set in the lanes that meet no panel.
+    dark: std::arch::x86_64::__m256,
 }
 
 /// A moving object met by a ray: its id, the object-local point, depth and surface.
