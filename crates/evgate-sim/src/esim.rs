@@ -156,8 +156,8 @@ impl PixelBand<'_> {
 
     /// [`PixelBand::emit_pixel`] on the static world (surface 0) for the band's pixels
     /// `pixels`, whose values at `t1_us` are `log_intensity`. The threshold tests run over
-    /// blocks of pixels in a loop the compiler vectorises; only blocks with a crossing are
-    /// visited pixel by pixel.
+    /// blocks of pixels, eight per vector compare ([`list_crossing_blocks`]); only blocks with
+    /// a crossing are visited pixel by pixel.
     pub fn emit_static_run(
         &mut self,
         pixels: Range<usize>,
@@ -167,7 +167,6 @@ impl PixelBand<'_> {
         refractory_us: i64,
         out: &mut Vec<LabelledEvent>,
     ) {
-        const BLOCK: usize = 8;
         // Blocks with a crossing are listed first and their state that only a crossing reads
         // is prefetched: it is rarely in cache, and its loads would otherwise stall each
         // crossing in turn. A run is handled in chunks so that the list has a fixed size.
@@ -176,28 +175,20 @@ impl PixelBand<'_> {
         for chunk_start in (0..pixels.len()).step_by(BLOCK * CHUNK_BLOCKS) {
             let chunk_end = (chunk_start + BLOCK * CHUNK_BLOCKS).min(pixels.len());
             let mut crossing_blocks = [0usize; CHUNK_BLOCKS];
-            let mut crossings = 0;
-            for start in (chunk_start..chunk_end).step_by(BLOCK) {
-                let end = (start + BLOCK).min(chunk_end);
-                let block = first + start..first + end;
-                let crossing = log_intensity[start..end]
-                    .iter()
-                    .zip(&self.reference[block.clone()])
-                    .zip(
-                        self.threshold_on[block.clone()]
-                            .iter()
-                            .zip(&self.threshold_off[block.clone()]),
-                    )
-                    .fold(false, |any, ((&l1, &reference), (&on, &off))| {
-                        any | (l1 - reference >= on) | (reference - l1 >= off)
-                    });
-                if crossing {
-                    crossing_blocks[crossings] = start;
-                    crossings += 1;
-                    prefetch(&self.last_event_us[block.start]);
-                    prefetch(&self.last_event_us[block.end - 1]);
-                    prefetch(&self.previous[block.start]);
-                }
+            let chunk = first + chunk_start..first + chunk_end;
+            let crossings = list_crossing_blocks(
+                &log_intensity[chunk_start..chunk_end],
+                &self.reference[chunk.clone()],
+                &self.threshold_on[chunk.clone()],
+                &self.threshold_off[chunk],
+                &mut crossing_blocks,
+            );
+            for start in &mut crossing_blocks[..crossings] {
+                *start += chunk_start;
+                let block = first + *start..first + (*start + BLOCK).min(chunk_end);
+                prefetch(&self.last_event_us[block.start]);
+                prefetch(&self.last_event_us[block.end - 1]);
+                prefetch(&self.previous[block.start]);
             }
             for &start in &crossing_blocks[..crossings] {
                 let end = (start + BLOCK).min(chunk_end);
@@ -262,6 +253,93 @@ impl PixelBand<'_> {
     }
 }
 
+/// Pixels whose threshold tests [`list_crossing_blocks`] takes together.
+const BLOCK: usize = 8;
+
+/// Writes to `blocks` the offset of each block of [`BLOCK`] pixels (the last may be shorter)
+/// in which some pixel crosses a threshold on its way from `reference` to `log_intensity`,
+/// and returns how many there are (`blocks` must have room for every block).
+fn list_crossing_blocks(
+    log_intensity: &[f32],
+    reference: &[f32],
+    on: &[f32],
+    off: &[f32],
+    blocks: &mut [usize],
+) -> usize {
+    let n = log_intensity.len();
+    assert!(reference.len() == n && on.len() == n && off.len() == n);
+    assert!(blocks.len() >= n.div_ceil(BLOCK));
+    #[cfg(target_arch = "x86_64")]
+    let (mut count, scalar_from) = if std::is_x86_feature_detected!("avx2") {
+        let whole = n / BLOCK * BLOCK;
+        // SAFETY: the CPU supports AVX2, checked just above.
+        let count = unsafe {
+            list_whole_crossing_blocks_avx2(
+                &log_intensity[..whole],
+                &reference[..whole],
+                &on[..whole],
+                &off[..whole],
+                blocks,
+            )
+        };
+        (count, whole)
+    } else {
+        (0, 0)
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let (mut count, scalar_from) = (0, 0);
+    for start in (scalar_from..n).step_by(BLOCK) {
+        let end = (start + BLOCK).min(n);
+        let crossing = (start..end).fold(false, |any, i| {
+            let (l1, reference) = (log_intensity[i], reference[i]);
+            any | (l1 - reference >= on[i]) | (reference - l1 >= off[i])
+        });
+        if crossing {
+            blocks[count] = start;
+            count += 1;
+        }
+    }
+    count
+}
+
+/// [`list_crossing_blocks`] for whole blocks (`log_intensity.len()` a multiple of [`BLOCK`]),
+/// eight pixels per vector compare: the same tests, so the same blocks.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn list_whole_crossing_blocks_avx2(
+    log_intensity: &[f32],
+    reference: &[f32],
+    on: &[f32],
+    off: &[f32],
+    blocks: &mut [usize],
+) -> usize {
+    use std::arch::x86_64::*;
+    let n = log_intensity.len();
+    assert!(n.is_multiple_of(BLOCK) && reference.len() == n && on.len() == n && off.len() == n);
+    assert!(blocks.len() >= n / BLOCK);
+    let mut count = 0;
+    for start in (0..n).step_by(BLOCK) {
+        // SAFETY (loads): `start + 8 <= n` for every slice (asserted).
+        let l1 = _mm256_loadu_ps(log_intensity.as_ptr().add(start));
+        let reference = _mm256_loadu_ps(reference.as_ptr().add(start));
+        let brighter = _mm256_cmp_ps::<_CMP_GE_OQ>(
+            _mm256_sub_ps(l1, reference),
+            _mm256_loadu_ps(on.as_ptr().add(start)),
+        );
+        let darker = _mm256_cmp_ps::<_CMP_GE_OQ>(
+            _mm256_sub_ps(reference, l1),
+            _mm256_loadu_ps(off.as_ptr().add(start)),
+        );
+        // Written whether or not the block crosses, so that the loop does not branch.
+        blocks[count] = start;
+        count += (_mm256_movemask_ps(_mm256_or_ps(brighter, darker)) != 0) as usize;
+    }
+    count
+}
+
 /// Asks the CPU to bring `value`'s cache line closer, without waiting for it.
 #[inline(always)]
 fn prefetch<T>(value: &T) {
@@ -311,6 +389,41 @@ mod tests {
             times,
             vec![(1400, true, 0), (1800, true, 0), (1800, false, 3)]
         );
+    }
+
+    #[test]
+    fn crossing_blocks_are_those_with_a_pixel_past_a_threshold() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for n in [0, 1, 7, 8, 9, 64, 100, 346] {
+            let draw = |rng: &mut ChaCha8Rng, range: std::ops::Range<f32>| -> Vec<f32> {
+                (0..n).map(|_| rng.gen_range(range.clone())).collect()
+            };
+            let reference = draw(&mut rng, -2.0..2.0);
+            let on = draw(&mut rng, 0.1..0.3);
+            let off = draw(&mut rng, 0.1..0.3);
+            // Mostly small changes, as between two renders: some blocks cross, most not.
+            let log: Vec<f32> = reference
+                .iter()
+                .map(|&r| {
+                    let change = if rng.gen_bool(0.04) { 0.5 } else { 0.09 };
+                    r + rng.gen_range(-change..change)
+                })
+                .collect();
+            let expected: Vec<usize> = (0..n)
+                .step_by(BLOCK)
+                .filter(|&start| {
+                    (start..(start + BLOCK).min(n))
+                        .any(|i| log[i] - reference[i] >= on[i] || reference[i] - log[i] >= off[i])
+                })
+                .collect();
+            let mut blocks = vec![usize::MAX; n.div_ceil(BLOCK)];
+            let count = list_crossing_blocks(&log, &reference, &on, &off, &mut blocks);
+            assert_eq!(&blocks[..count], &expected[..], "{n} pixels");
+            assert!(
+                n < 64 || (0 < count && count < n / BLOCK),
+                "{n} pixels: {count} crossing"
+            );
+        }
     }
 
     #[test]
