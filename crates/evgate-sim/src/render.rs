@@ -236,11 +236,11 @@ impl RowDirections {
     /// the row's `ray_y` (as [`Snapshot::trace`] computes them).
     #[inline(always)]
     fn fill(&mut self, rotation: &Mat3, ray_x: &[f32], ray_y: f32) {
-        for (c, &x) in ray_x.iter().enumerate() {
+        // Zipped rather than indexed: without bounds checks the loop vectorises.
+        let components = self.x.iter_mut().zip(&mut self.y).zip(&mut self.z);
+        for (&x, ((dx, dy), dz)) in ray_x.iter().zip(components) {
             let direction = rotation.apply(Vec3::new(x, ray_y, 1.0));
-            self.x[c] = direction.x;
-            self.y[c] = direction.y;
-            self.z[c] = direction.z;
+            (*dx, *dy, *dz) = (direction.x, direction.y, direction.z);
         }
     }
 
