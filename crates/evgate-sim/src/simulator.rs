@@ -115,6 +115,9 @@ pub struct Simulator {
     next_static_step_us: Option<i64>,
     pending: VecDeque<LabelledEvent>,
     threads: usize,
+    /// The `threads - 1` helpers that render beside the calling thread, started at the first
+    /// step: a thread started per step cost each step its stack's page faults and a wake-up.
+    helpers: Option<rayon::ThreadPool>,
     stats: SimStats,
 }
 
@@ -205,6 +208,7 @@ impl Simulator {
             next_static_step_us: None,
             pending: VecDeque::new(),
             threads,
+            helpers: None,
             stats: SimStats::default(),
         })
     }
@@ -212,6 +216,7 @@ impl Simulator {
     /// Limits rendering to `threads` worker threads (at least one).
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
+        self.helpers = None;
     }
 
     pub fn config(&self) -> &SimConfig {
@@ -358,10 +363,9 @@ impl Simulator {
             );
             let (scene, config) = (&self.scene, &self.config);
             let next_static_step_us = &mut self.next_static_step_us;
-            std::thread::scope(|scope| {
-                let helpers: Vec<_> = (1..self.threads).map(|_| scope.spawn(run_all)).collect();
-                // The previous step's sort and the next step's motion probe, which would
-                // leave the helpers idle between steps, overlap their rendering of this one.
+            // The previous step's sort and the next step's motion probe, which would leave the
+            // helpers idle between steps, overlap their rendering of this one.
+            let mut main_share = || {
                 deliver(
                     unsorted,
                     sorter,
@@ -372,15 +376,38 @@ impl Simulator {
                     stats,
                 );
                 *next_static_step_us = Some(Simulator::static_step_us(scene, config, t1));
-                parts.push(run_all());
-                for helper in helpers {
-                    parts.push(
-                        helper
-                            .join()
-                            .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
-                    );
-                }
-            });
+                run_all()
+            };
+            let helper_count = self.threads - 1;
+            if helper_count == 0 {
+                parts.push(main_share());
+            } else {
+                let helpers = self.helpers.get_or_insert_with(|| {
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(helper_count)
+                        .thread_name(|i| format!("evgate-sim-{i}"))
+                        .build()
+                        .unwrap_or_else(|e| panic!("starting the simulator's helper threads: {e}"))
+                });
+                let helper_parts = Mutex::new(Vec::with_capacity(helper_count));
+                helpers.in_place_scope(|scope| {
+                    for _ in 0..helper_count {
+                        scope.spawn(|_| {
+                            let part = run_all();
+                            helper_parts
+                                .lock()
+                                .unwrap_or_else(PoisonError::into_inner)
+                                .push(part);
+                        });
+                    }
+                    parts.push(main_share());
+                });
+                parts.extend(
+                    helper_parts
+                        .into_inner()
+                        .unwrap_or_else(PoisonError::into_inner),
+                );
+            }
             parts.push(take_buffer());
         }
         std::mem::swap(&mut self.background, &mut self.next_background);
