@@ -150,6 +150,26 @@ impl TextureAtlas {
                 _mm256_i32gather_epi32::<4>(self.size_log2.as_ptr(), texture),
             )
         };
+        // Where each lane's level starts: for one texture, looked up among its levels'
+        // starts held in two registers (a permutation each) instead of gathered from memory.
+        let uniform_starts = uniform.then(|| {
+            let starts = &self.level_starts[first * MAX_LEVELS..(first + 1) * MAX_LEVELS];
+            (
+                _mm256_loadu_si256(starts.as_ptr().cast()),
+                _mm256_loadu_si256(starts.as_ptr().add(8).cast()),
+            )
+        });
+        let level_start = |level: __m256i| match uniform_starts {
+            Some((low, high)) => _mm256_blendv_epi8(
+                _mm256_permutevar8x32_epi32(low, level),
+                _mm256_permutevar8x32_epi32(high, level),
+                _mm256_cmpgt_epi32(level, _mm256_set1_epi32(7)),
+            ),
+            None => _mm256_i32gather_epi32::<4>(
+                self.level_starts.as_ptr(),
+                _mm256_add_epi32(_mm256_slli_epi32::<4>(texture), level),
+            ),
+        };
         let one_i = _mm256_set1_epi32(1);
         // approximate_log2(footprint), clamped to the coarsest level.
         let bits = _mm256_castps_si256(footprint);
@@ -177,7 +197,7 @@ impl TextureAtlas {
             fine,
         )));
         let (us, vs) = (_mm256_mul_ps(u, scale), _mm256_mul_ps(v, scale));
-        let a = self.bilinear8(texture, size_log2, fine, us, vs);
+        let a = self.bilinear8(level_start(fine), size_log2, fine, us, vs);
         let next = _mm256_add_epi32(fine, one_i);
         let has_next = _mm256_cmpgt_epi32(level_counts, next);
         let blends = _mm256_cmp_ps::<_CMP_NEQ_UQ>(blend, _mm256_setzero_ps());
@@ -193,7 +213,7 @@ impl TextureAtlas {
         let coarser_level = _mm256_min_epi32(next, _mm256_sub_epi32(level_counts, one_i));
         let half = _mm256_set1_ps(0.5);
         let b = self.bilinear8(
-            texture,
+            level_start(coarser_level),
             size_log2,
             coarser_level,
             _mm256_mul_ps(us, half),
@@ -203,13 +223,14 @@ impl TextureAtlas {
         _mm256_blendv_ps(a, mixed, use_coarser)
     }
 
-    /// `Level::bilinear` of level `level` of `texture`, for eight lanes.
+    /// `Level::bilinear` of level `level` (of a texture whose level 0 has side
+    /// `1 << size_log2`), stored from index `start`, for eight lanes.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline]
     unsafe fn bilinear8(
         &self,
-        texture: std::arch::x86_64::__m256i,
+        start: std::arch::x86_64::__m256i,
         size_log2: std::arch::x86_64::__m256i,
         level: std::arch::x86_64::__m256i,
         u: std::arch::x86_64::__m256,
@@ -232,10 +253,6 @@ impl TextureAtlas {
         let mask = _mm256_sub_epi32(_mm256_sllv_epi32(one_i, side_log2), one_i);
         let tile_log2 = _mm256_min_epi32(side_log2, _mm256_set1_epi32(TILE_LOG2));
         let tile_mask = _mm256_sub_epi32(_mm256_sllv_epi32(one_i, tile_log2), one_i);
-        let start = _mm256_i32gather_epi32::<4>(
-            self.level_starts.as_ptr(),
-            _mm256_add_epi32(_mm256_slli_epi32::<4>(texture), level),
-        );
         // `tiled_index`, split into its column and row parts.
         let tile_area_log2 = _mm256_add_epi32(tile_log2, tile_log2);
         let column = |x: __m256i| {

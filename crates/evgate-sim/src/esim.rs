@@ -240,7 +240,7 @@ impl PixelBand<'_> {
             } else {
                 1.0
             };
-            let t = (t0_us + (fraction * span).ceil() as i64).clamp(t0_us + 1, t1_us);
+            let t = (t0_us + ceil_non_negative(fraction * span)).clamp(t0_us + 1, t1_us);
             if t - self.last_event_us[i] >= refractory_us {
                 self.last_event_us[i] = t;
                 out.push(LabelledEvent {
@@ -340,6 +340,14 @@ unsafe fn list_whole_crossing_blocks_avx2(
     count
 }
 
+/// `x.ceil() as i64` for `x >= 0` (and NaN, which gives 0), inline: `f32::ceil` is a
+/// library call on x86-64 without SSE4.1, and it was a tenth of the cost of each event.
+#[inline(always)]
+fn ceil_non_negative(x: f32) -> i64 {
+    let truncated = x as i64;
+    truncated + i64::from((truncated as f32) < x)
+}
+
 /// Asks the CPU to bring `value`'s cache line closer, without waiting for it.
 #[inline(always)]
 fn prefetch<T>(value: &T) {
@@ -423,6 +431,25 @@ mod tests {
                 n < 64 || (0 < count && count < n / BLOCK),
                 "{n} pixels: {count} crossing"
             );
+        }
+    }
+
+    #[test]
+    fn inline_ceiling_matches_the_library_one() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let special = [
+            0.0,
+            -0.0,
+            0.5,
+            1.0,
+            1.0 + f32::EPSILON,
+            4999.999,
+            5000.0,
+            f32::NAN,
+        ];
+        let drawn = (0..100_000).map(|_| rng.gen_range(0.0f32..6000.0));
+        for x in special.into_iter().chain(drawn) {
+            assert_eq!(ceil_non_negative(x), x.ceil() as i64, "{x}");
         }
     }
 
