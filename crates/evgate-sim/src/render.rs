@@ -61,41 +61,47 @@ pub struct Snapshot<'a> {
     objects: Vec<PlacedObject>,
     panel_bounds: Vec<ScreenBounds>,
     panel_planes: Vec<PlanePlacement>,
-    panel_lanes: PanelLanes,
+    panel_constants: Vec<PanelConstants>,
     all_objects: Vec<usize>,
 }
 
-/// The panels' shading constants, one array per scalar, for gathering eight pixels' panels.
-#[derive(Default)]
-struct PanelLanes {
-    origin: [Vec<f32>; 3],
-    axis_u: [Vec<f32>; 3],
-    axis_v: [Vec<f32>; 3],
-    normal: [Vec<f32>; 3],
-    texels_per_m: Vec<f32>,
-    log_illumination: Vec<f32>,
-    texture: Vec<i32>,
+/// A panel's shading constants in one cache line, for eight pixels' panels: broadcast from one
+/// record where a block lies on one panel, gathered field by field (a stride of
+/// [`PANEL_FIELDS`]) where it does not.
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(64))]
+struct PanelConstants([f32; PANEL_FIELDS]);
+
+/// Values per [`PanelConstants`] record.
+const PANEL_FIELDS: usize = 16;
+
+/// Where each constant lies in a [`PanelConstants`] record (the texture index as `f32` bits).
+mod field {
+    pub const ORIGIN: usize = 0;
+    pub const AXIS_U: usize = 3;
+    pub const AXIS_V: usize = 6;
+    pub const NORMAL: usize = 9;
+    pub const TEXELS_PER_M: usize = 12;
+    pub const LOG_ILLUMINATION: usize = 13;
+    pub const TEXTURE: usize = 14;
 }
 
-impl PanelLanes {
-    fn new(panels: &[Panel], planes: &[PlanePlacement]) -> PanelLanes {
-        let mut lanes = PanelLanes::default();
-        for (panel, plane) in panels.iter().zip(planes) {
-            for (axis, vector) in [
-                (&mut lanes.origin, panel.origin),
-                (&mut lanes.axis_u, panel.axis_u),
-                (&mut lanes.axis_v, panel.axis_v),
-                (&mut lanes.normal, plane.normal),
-            ] {
-                axis[0].push(vector.x);
-                axis[1].push(vector.y);
-                axis[2].push(vector.z);
-            }
-            lanes.texels_per_m.push(plane.texels_per_m);
-            lanes.log_illumination.push(plane.log_illumination);
-            lanes.texture.push(panel.texture as i32);
+impl PanelConstants {
+    fn new(panel: &Panel, plane: &PlanePlacement) -> PanelConstants {
+        let mut record = [0.0; PANEL_FIELDS];
+        for (first, vector) in [
+            (field::ORIGIN, panel.origin),
+            (field::AXIS_U, panel.axis_u),
+            (field::AXIS_V, panel.axis_v),
+            (field::NORMAL, plane.normal),
+        ] {
+            record[first..first + 3].copy_from_slice(&[vector.x, vector.y, vector.z]);
         }
-        lanes
+        record[field::TEXELS_PER_M] = plane.texels_per_m;
+        record[field::LOG_ILLUMINATION] = plane.log_illumination;
+        record[field::TEXTURE] =
+            f32::from_bits(i32::try_from(panel.texture).expect("texture index under 2^31") as u32);
+        PanelConstants(record)
     }
 }
 
@@ -315,7 +321,12 @@ impl<'a> Snapshot<'a> {
         Snapshot {
             scene,
             camera,
-            panel_lanes: PanelLanes::new(&scene.panels, &panel_planes),
+            panel_constants: scene
+                .panels
+                .iter()
+                .zip(&panel_planes)
+                .map(|(panel, plane)| PanelConstants::new(panel, plane))
+                .collect(),
             panel_planes,
             all_objects: (0..object_count).collect(),
             objects,
@@ -579,25 +590,36 @@ impl<'a> Snapshot<'a> {
     #[inline]
     unsafe fn panel_texels8(&self, scratch: &RowScratch, start: usize) -> PanelTexels8 {
         use std::arch::x86_64::*;
-        let lanes = &self.panel_lanes;
         let block = start..start + 8;
         let id = _mm256_loadu_si256(scratch.nearest_panel[block.clone()].as_ptr().cast());
         let dark = _mm256_cmpeq_epi32(id, _mm256_set1_epi32(NO_PANEL as i32));
         let panel = _mm256_andnot_si256(dark, id);
-        let count = lanes.texture.len() as i32;
-        let mut panels = [0i32; 8];
-        _mm256_storeu_si256(panels.as_mut_ptr().cast(), panel);
-        assert!(panels.iter().all(|&p| (0..count).contains(&p)));
+        let count = self.panel_constants.len() as i32;
+        let valid = _mm256_andnot_si256(
+            _mm256_cmpgt_epi32(_mm256_setzero_si256(), panel),
+            _mm256_cmpgt_epi32(_mm256_set1_epi32(count), panel),
+        );
+        assert!(
+            _mm256_movemask_epi8(valid) == -1,
+            "panel index out of 0..{count}"
+        );
         // Most blocks lie on one panel: their constants are loaded once and broadcast rather
         // than gathered lane by lane (the same values, hence the same bits).
-        let uniform = panels.iter().all(|&p| p == panels[0]);
-        let first = panels[0] as usize;
-        // SAFETY (gathers): every lane's panel index is below the panel count (asserted).
-        let gather = |values: &Vec<f32>| {
+        let first_lane = _mm256_permutevar8x32_epi32(panel, _mm256_setzero_si256());
+        let uniform = _mm256_movemask_epi8(_mm256_cmpeq_epi32(panel, first_lane)) == -1;
+        let record = &self.panel_constants[_mm256_cvtsi256_si32(panel) as usize].0;
+        let base = self.panel_constants.as_ptr().cast::<f32>();
+        let stride_index = _mm256_mullo_epi32(panel, _mm256_set1_epi32(PANEL_FIELDS as i32));
+        // SAFETY (gathers): every lane's panel index is below the panel count (asserted), and
+        // each field lies within its record.
+        let gather = |field: usize| {
             if uniform {
-                _mm256_set1_ps(values[first])
+                _mm256_set1_ps(record[field])
             } else {
-                _mm256_i32gather_ps::<4>(values.as_ptr(), panel)
+                _mm256_i32gather_ps::<4>(
+                    base,
+                    _mm256_add_epi32(stride_index, _mm256_set1_epi32(field as i32)),
+                )
             }
         };
         let [dx, dy, dz] = [
@@ -609,16 +631,16 @@ impl<'a> Snapshot<'a> {
         let t = _mm256_loadu_ps(scratch.nearest_depth[block].as_ptr());
         let camera = self.camera.translation;
         // relative = camera + direction · t − panel origin, per component.
-        let relative = |camera: f32, direction: __m256, origin: &Vec<f32>| {
+        let relative = |camera: f32, direction: __m256, origin: usize| {
             _mm256_sub_ps(
                 _mm256_add_ps(_mm256_set1_ps(camera), _mm256_mul_ps(direction, t)),
                 gather(origin),
             )
         };
         let (rx, ry, rz) = (
-            relative(camera.x, dx, &lanes.origin[0]),
-            relative(camera.y, dy, &lanes.origin[1]),
-            relative(camera.z, dz, &lanes.origin[2]),
+            relative(camera.x, dx, field::ORIGIN),
+            relative(camera.y, dy, field::ORIGIN + 1),
+            relative(camera.z, dz, field::ORIGIN + 2),
         );
         let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
             _mm256_add_ps(
@@ -626,11 +648,11 @@ impl<'a> Snapshot<'a> {
                 _mm256_mul_ps(az, bz),
             )
         };
-        let axis = |axis: &[Vec<f32>; 3]| (gather(&axis[0]), gather(&axis[1]), gather(&axis[2]));
-        let (ux, uy, uz) = axis(&lanes.axis_u);
-        let (vx, vy, vz) = axis(&lanes.axis_v);
-        let (nx, ny, nz) = axis(&lanes.normal);
-        let texels_per_m = gather(&lanes.texels_per_m);
+        let axis = |first: usize| (gather(first), gather(first + 1), gather(first + 2));
+        let (ux, uy, uz) = axis(field::AXIS_U);
+        let (vx, vy, vz) = axis(field::AXIS_V);
+        let (nx, ny, nz) = axis(field::NORMAL);
+        let texels_per_m = gather(field::TEXELS_PER_M);
         let cosine = _mm256_div_ps(
             _mm256_andnot_ps(_mm256_set1_ps(-0.0), dot(nx, ny, nz, dx, dy, dz)),
             _mm256_sqrt_ps(dot(dx, dy, dz, dx, dy, dz)),
@@ -645,11 +667,7 @@ impl<'a> Snapshot<'a> {
         // replaced by the dark level.
         let or_zero = |value: __m256| _mm256_andnot_ps(dark_ps, value);
         PanelTexels8 {
-            texture: if uniform {
-                _mm256_set1_epi32(lanes.texture[first])
-            } else {
-                _mm256_i32gather_epi32::<4>(lanes.texture.as_ptr(), panel)
-            },
+            texture: _mm256_castps_si256(gather(field::TEXTURE)),
             u: or_zero(_mm256_mul_ps(dot(rx, ry, rz, ux, uy, uz), texels_per_m)),
             v: or_zero(_mm256_mul_ps(dot(rx, ry, rz, vx, vy, vz), texels_per_m)),
             footprint: _mm256_blendv_ps(
@@ -657,7 +675,7 @@ impl<'a> Snapshot<'a> {
                 _mm256_set1_ps(1.0),
                 dark_ps,
             ),
-            log_illumination: gather(&lanes.log_illumination),
+            log_illumination: gather(field::LOG_ILLUMINATION),
             dark: dark_ps,
         }
     }
