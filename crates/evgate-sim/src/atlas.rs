@@ -8,6 +8,8 @@
 //! line each: a bilinear footprint then mostly lies in one line, and a row of pixels crossing
 //! the texture in any direction touches fewer lines than with row-major texels.
 
+#[cfg(target_arch = "x86_64")]
+use crate::index_lanes::checked_first_and_uniform;
 use crate::texture::Texture;
 
 /// Most mip levels per texture (a 32768-texel texture has 16).
@@ -124,19 +126,9 @@ impl TextureAtlas {
         footprint: std::arch::x86_64::__m256,
     ) -> std::arch::x86_64::__m256 {
         use std::arch::x86_64::*;
-        let textures = self.level_counts.len() as i32;
-        let valid = _mm256_andnot_si256(
-            _mm256_cmpgt_epi32(_mm256_setzero_si256(), texture),
-            _mm256_cmpgt_epi32(_mm256_set1_epi32(textures), texture),
-        );
-        assert!(
-            _mm256_movemask_epi8(valid) == -1,
-            "texture index out of 0..{textures}"
-        );
         // Where all lanes sample one texture, its sizes are broadcast instead of gathered.
-        let first_lane = _mm256_permutevar8x32_epi32(texture, _mm256_setzero_si256());
-        let uniform = _mm256_movemask_epi8(_mm256_cmpeq_epi32(texture, first_lane)) == -1;
-        let first = _mm256_cvtsi256_si32(texture) as usize;
+        let (first, uniform) =
+            checked_first_and_uniform(texture, self.level_counts.len(), "texture");
         // SAFETY (all gathers and loads): every index is a valid texture (asserted above), a level
         // below its count, or a texel inside that level (masked by its size).
         let (level_counts, size_log2) = if uniform {

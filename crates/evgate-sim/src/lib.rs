@@ -23,6 +23,7 @@ pub mod config;
 pub mod esim;
 pub mod event_model;
 pub mod event_sort;
+mod index_lanes;
 pub mod linalg;
 pub mod motion;
 pub mod noise;

@@ -5,6 +5,8 @@
 use std::ops::Range;
 
 use crate::camera::project_world;
+#[cfg(target_arch = "x86_64")]
+use crate::index_lanes::checked_first_and_uniform;
 use crate::linalg::{Mat3, RigidTransform, Vec3};
 use crate::scene::{Panel, Scene, Shape};
 
@@ -594,20 +596,11 @@ impl<'a> Snapshot<'a> {
         let id = _mm256_loadu_si256(scratch.nearest_panel[block.clone()].as_ptr().cast());
         let dark = _mm256_cmpeq_epi32(id, _mm256_set1_epi32(NO_PANEL as i32));
         let panel = _mm256_andnot_si256(dark, id);
-        let count = self.panel_constants.len() as i32;
-        let valid = _mm256_andnot_si256(
-            _mm256_cmpgt_epi32(_mm256_setzero_si256(), panel),
-            _mm256_cmpgt_epi32(_mm256_set1_epi32(count), panel),
-        );
-        assert!(
-            _mm256_movemask_epi8(valid) == -1,
-            "panel index out of 0..{count}"
-        );
         // Most blocks lie on one panel: their constants are loaded once and broadcast rather
         // than gathered lane by lane (the same values, hence the same bits).
-        let first_lane = _mm256_permutevar8x32_epi32(panel, _mm256_setzero_si256());
-        let uniform = _mm256_movemask_epi8(_mm256_cmpeq_epi32(panel, first_lane)) == -1;
-        let record = &self.panel_constants[_mm256_cvtsi256_si32(panel) as usize].0;
+        let (first, uniform) =
+            checked_first_and_uniform(panel, self.panel_constants.len(), "panel");
+        let record = &self.panel_constants[first].0;
         let base = self.panel_constants.as_ptr().cast::<f32>();
         let stride_index = _mm256_mullo_epi32(panel, _mm256_set1_epi32(PANEL_FIELDS as i32));
         // SAFETY (gathers): every lane's panel index is below the panel count (asserted), and
@@ -715,9 +708,11 @@ impl<'a> Snapshot<'a> {
             ray_x: (0..width)
                 .map(|column| intrinsics.ray(column as f32, 0.0).x)
                 .collect(),
-            directions: RowDirections::new(width),
-            nearest_depth: vec![f32::INFINITY; width],
-            nearest_panel: vec![NO_PANEL; width],
+            // Whole blocks of `LANES` columns: the panel search's last block reads past the
+            // sensor's last column (its lanes there are never eligible).
+            directions: RowDirections::new(width.div_ceil(LANES) * LANES),
+            nearest_depth: vec![f32::INFINITY; width.div_ceil(LANES) * LANES],
+            nearest_panel: vec![NO_PANEL; width.div_ceil(LANES) * LANES],
             row_panels: Vec::with_capacity(self.scene.panels.len()),
             active_objects: Vec::with_capacity(self.objects.len()),
         }
@@ -758,8 +753,8 @@ impl<'a> Snapshot<'a> {
         self.nearest_on_panels(
             &scratch.directions,
             &scratch.row_panels,
-            &mut scratch.nearest_depth[..n],
-            &mut scratch.nearest_panel[..n],
+            &mut scratch.nearest_depth[..n.div_ceil(LANES) * LANES],
+            &mut scratch.nearest_panel[..n.div_ceil(LANES) * LANES],
         );
     }
 
@@ -896,11 +891,10 @@ impl<'a> Snapshot<'a> {
     }
 
     /// The nearest of `panels` along each ray in `directions` (and its depth), or
-    /// [`NO_PANEL`] (at infinity): the per-pixel test of [`Snapshot::trace`], panel after panel
-    /// in index order, written without branches so that it vectorises. Eight pixels at a time
-    /// keep their nearest depth and panel in registers over all panels and store them once: a
-    /// pass per panel over the row stored them back after every panel, which LLVM compiled to
-    /// masked stores, slow on AMD Zen.
+    /// [`NO_PANEL`] (at infinity), for whole blocks of [`LANES`] columns
+    /// (`nearest_depth.len()` a multiple of it; columns beyond the panels' ranges are never
+    /// eligible): the per-pixel test of [`Snapshot::trace`], panel after panel in index order,
+    /// in AVX2 where the CPU has it.
     #[inline(always)]
     fn nearest_on_panels(
         &self,
@@ -909,68 +903,21 @@ impl<'a> Snapshot<'a> {
         nearest_depth: &mut [f32],
         nearest_panel: &mut [u32],
     ) {
-        let n = nearest_depth.len();
-        let (xs, ys, zs) = (&directions.x[..n], &directions.y[..n], &directions.z[..n]);
-        let nearest_panel = &mut nearest_panel[..n];
-        let origin = self.camera.translation;
-        let blocks = n / LANES * LANES;
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
             unsafe {
-                self.nearest_in_blocks_avx2(
-                    directions,
-                    panels,
-                    &mut nearest_depth[..blocks],
-                    &mut nearest_panel[..blocks],
-                )
+                self.nearest_in_blocks_avx2(directions, panels, nearest_depth, nearest_panel)
             };
-        } else {
-            self.nearest_in_blocks(
-                directions,
-                panels,
-                &mut nearest_depth[..blocks],
-                &mut nearest_panel[..blocks],
-            );
+            return;
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        self.nearest_in_blocks(
-            directions,
-            panels,
-            &mut nearest_depth[..blocks],
-            &mut nearest_panel[..blocks],
-        );
-        for c in blocks..n {
-            let direction = Vec3::new(xs[c], ys[c], zs[c]);
-            let (mut depth, mut id) = (f32::INFINITY, NO_PANEL);
-            for row_panel in panels {
-                if c < row_panel.start || c >= row_panel.end {
-                    continue;
-                }
-                let i = row_panel.index;
-                let plane = &self.panel_planes[i];
-                let distance = plane.offset / plane.normal.dot(direction);
-                let panel = &self.scene.panels[i];
-                let inside = match panel.half_extent {
-                    None => true,
-                    Some((hu, hv)) => {
-                        let relative = origin + direction * distance - panel.origin;
-                        !((relative.dot(panel.axis_u).abs() > hu)
-                            | (relative.dot(panel.axis_v).abs() > hv))
-                    }
-                };
-                if (distance > 1e-3) & (distance < depth) & inside {
-                    depth = distance;
-                    id = i as u32;
-                }
-            }
-            nearest_depth[c] = depth;
-            nearest_panel[c] = id;
-        }
+        self.nearest_in_blocks(directions, panels, nearest_depth, nearest_panel);
     }
 
-    /// [`Snapshot::nearest_on_panels`] for whole blocks of [`LANES`] columns
-    /// (`nearest_depth.len()` a multiple of it).
+    /// [`Snapshot::nearest_on_panels`] without AVX2, written without branches so that it
+    /// vectorises. Eight pixels at a time keep their nearest depth and panel in registers over
+    /// all panels and store them once: a pass per panel over the row stored them back after
+    /// every panel, which LLVM compiled to masked stores, slow on AMD Zen.
     #[inline(always)]
     fn nearest_in_blocks(
         &self,
