@@ -635,34 +635,24 @@ impl<'a> Snapshot<'a> {
             relative(camera.y, dy, field::ORIGIN + 1),
             relative(camera.z, dz, field::ORIGIN + 2),
         );
-        let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
-            _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
-                _mm256_mul_ps(az, bz),
-            )
-        };
-        let axis = |first: usize| (gather(first), gather(first + 1), gather(first + 2));
-        let (ux, uy, uz) = axis(field::AXIS_U);
-        let (vx, vy, vz) = axis(field::AXIS_V);
-        let (nx, ny, nz) = axis(field::NORMAL);
+        let axis = |first: usize| [gather(first), gather(first + 1), gather(first + 2)];
+        let relative = [rx, ry, rz];
         let texels_per_m = gather(field::TEXELS_PER_M);
-        let cosine = _mm256_div_ps(
-            _mm256_andnot_ps(_mm256_set1_ps(-0.0), dot(nx, ny, nz, dx, dy, dz)),
-            _mm256_sqrt_ps(dot(dx, dy, dz, dx, dy, dz)),
-        );
-        let cos_incidence = _mm256_max_ps(cosine, _mm256_set1_ps(0.05));
-        let metres_per_pixel = _mm256_div_ps(
-            t,
-            _mm256_mul_ps(_mm256_set1_ps(self.scene.intrinsics.fx), cos_incidence),
-        );
+        let metres_per_pixel = self.metres_per_pixel8(axis(field::NORMAL), [dx, dy, dz], t);
         let dark_ps = _mm256_castsi256_ps(dark);
         // Dark lanes read texel (0, 0) of the panel-0 texture at level 0; their value is
         // replaced by the dark level.
         let or_zero = |value: __m256| _mm256_andnot_ps(dark_ps, value);
         PanelTexels8 {
             texture: _mm256_castps_si256(gather(field::TEXTURE)),
-            u: or_zero(_mm256_mul_ps(dot(rx, ry, rz, ux, uy, uz), texels_per_m)),
-            v: or_zero(_mm256_mul_ps(dot(rx, ry, rz, vx, vy, vz), texels_per_m)),
+            u: or_zero(_mm256_mul_ps(
+                dot8(relative, axis(field::AXIS_U)),
+                texels_per_m,
+            )),
+            v: or_zero(_mm256_mul_ps(
+                dot8(relative, axis(field::AXIS_V)),
+                texels_per_m,
+            )),
             footprint: _mm256_blendv_ps(
                 _mm256_mul_ps(metres_per_pixel, texels_per_m),
                 _mm256_set1_ps(1.0),
@@ -688,8 +678,7 @@ impl<'a> Snapshot<'a> {
         let direction = scratch.directions.at(c);
         let distance = scratch.nearest_depth[c];
         let relative = self.camera.translation + direction * distance - panel.origin;
-        let cos_incidence = (plane.normal.dot(direction).abs() / direction.length()).max(0.05);
-        let metres_per_pixel = distance / (self.scene.intrinsics.fx * cos_incidence);
+        let metres_per_pixel = self.metres_per_pixel(plane.normal, direction, distance);
         let tpm = plane.texels_per_m;
         Some(PanelTexel {
             texture: panel.texture,
@@ -1019,13 +1008,7 @@ impl<'a> Snapshot<'a> {
                 let i = row_panel.index;
                 let plane = &self.panel_planes[i];
                 let normal = plane.normal;
-                let along_normal = _mm256_add_ps(
-                    _mm256_add_ps(
-                        _mm256_mul_ps(_mm256_set1_ps(normal.x), dx),
-                        _mm256_mul_ps(_mm256_set1_ps(normal.y), dy),
-                    ),
-                    _mm256_mul_ps(_mm256_set1_ps(normal.z), dz),
-                );
+                let along_normal = dot8(broadcast(normal), [dx, dy, dz]);
                 let distance = _mm256_div_ps(_mm256_set1_ps(plane.offset), along_normal);
                 // Columns are below 2^31: the panel's range as signed compares.
                 let mut eligible = _mm256_andnot_si256(
@@ -1049,13 +1032,7 @@ impl<'a> Snapshot<'a> {
                         relative(origin.z, dz, panel.origin.z),
                     );
                     let outside = |axis: Vec3, half: f32| {
-                        let along = _mm256_add_ps(
-                            _mm256_add_ps(
-                                _mm256_mul_ps(rx, _mm256_set1_ps(axis.x)),
-                                _mm256_mul_ps(ry, _mm256_set1_ps(axis.y)),
-                            ),
-                            _mm256_mul_ps(rz, _mm256_set1_ps(axis.z)),
-                        );
+                        let along = dot8([rx, ry, rz], broadcast(axis));
                         _mm256_cmp_ps::<_CMP_GT_OQ>(
                             _mm256_andnot_ps(sign, along),
                             _mm256_set1_ps(half),
@@ -1230,24 +1207,7 @@ impl<'a> Snapshot<'a> {
         }
         let hit_ps = _mm256_castsi256_ps(hit);
         // `material_texel`, lane by lane.
-        let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
-            _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
-                _mm256_mul_ps(az, bz),
-            )
-        };
-        let cosine = _mm256_div_ps(
-            _mm256_andnot_ps(
-                _mm256_set1_ps(-0.0),
-                dot(hits.normal[0], hits.normal[1], hits.normal[2], dx, dy, dz),
-            ),
-            _mm256_sqrt_ps(dot(dx, dy, dz, dx, dy, dz)),
-        );
-        let cos_incidence = _mm256_max_ps(cosine, _mm256_set1_ps(0.05));
-        let metres_per_pixel = _mm256_div_ps(
-            hits.depth,
-            _mm256_mul_ps(_mm256_set1_ps(self.scene.intrinsics.fx), cos_incidence),
-        );
+        let metres_per_pixel = self.metres_per_pixel8(hits.normal, [dx, dy, dz], hits.depth);
         // Lanes without a hit sample a valid texel of a hit lane's texture; their value is
         // discarded.
         let first_hit = hit_lanes.trailing_zeros() as i32;
@@ -1319,17 +1279,7 @@ impl<'a> Snapshot<'a> {
         let sign_bit = _mm256_set1_ps(-0.0);
         let abs = |value: __m256| _mm256_andnot_ps(sign_bit, value);
         // `Mat3::apply`, lane by lane.
-        let apply = |m: &Mat3, v: [__m256; 3]| {
-            m.rows.map(|row| {
-                _mm256_add_ps(
-                    _mm256_add_ps(
-                        _mm256_mul_ps(_mm256_set1_ps(row.x), v[0]),
-                        _mm256_mul_ps(_mm256_set1_ps(row.y), v[1]),
-                    ),
-                    _mm256_mul_ps(_mm256_set1_ps(row.z), v[2]),
-                )
-            })
-        };
+        let apply = |m: &Mat3, v: [__m256; 3]| m.rows.map(|row| dot8(broadcast(row), v));
         for &i in &scratch.active_objects {
             let placed = &self.objects[i];
             let bounds = placed.bounds;
@@ -1540,11 +1490,42 @@ impl<'a> Snapshot<'a> {
             + texel.log_illumination
     }
 
+    /// The width of a pixel's footprint, in metres, on a surface of normal `normal` met at
+    /// `depth` along `direction` (grazing angles capped at a cosine of 0.05).
+    fn metres_per_pixel(&self, normal: Vec3, direction: Vec3, depth: f32) -> f32 {
+        let cos_incidence = (normal.dot(direction).abs() / direction.length()).max(0.05);
+        depth / (self.scene.intrinsics.fx * cos_incidence)
+    }
+
+    /// [`Snapshot::metres_per_pixel`] for eight lanes, the same operations per lane.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn metres_per_pixel8(
+        &self,
+        normal: [std::arch::x86_64::__m256; 3],
+        direction: [std::arch::x86_64::__m256; 3],
+        depth: std::arch::x86_64::__m256,
+    ) -> std::arch::x86_64::__m256 {
+        use std::arch::x86_64::*;
+        let cosine = _mm256_div_ps(
+            _mm256_andnot_ps(_mm256_set1_ps(-0.0), dot8(normal, direction)),
+            _mm256_sqrt_ps(dot8(direction, direction)),
+        );
+        let cos_incidence = _mm256_max_ps(cosine, _mm256_set1_ps(0.05));
+        _mm256_div_ps(
+            depth,
+            _mm256_mul_ps(_mm256_set1_ps(self.scene.intrinsics.fx), cos_incidence),
+        )
+    }
+
     /// What [`Snapshot::shade`] samples, and the light it adds.
     #[inline(always)]
     fn material_texel(&self, material: &Material, direction: Vec3, depth: f32) -> PanelTexel {
-        let cos_incidence = (material.normal.dot(direction).abs() / direction.length()).max(0.05);
-        let metres_per_pixel = depth / (self.scene.intrinsics.fx * cos_incidence);
+        let metres_per_pixel = self.metres_per_pixel(material.normal, direction, depth);
         PanelTexel {
             texture: material.texture,
             u: material.u * material.texels_per_m,
@@ -1553,6 +1534,40 @@ impl<'a> Snapshot<'a> {
             log_illumination: material.log_illumination,
         }
     }
+}
+
+/// [`Vec3::dot`] for eight lanes: `(a.x·b.x + a.y·b.y) + a.z·b.z`, rounded as the scalar one.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn dot8(
+    a: [std::arch::x86_64::__m256; 3],
+    b: [std::arch::x86_64::__m256; 3],
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    _mm256_add_ps(
+        _mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])),
+        _mm256_mul_ps(a[2], b[2]),
+    )
+}
+
+/// `v` in every lane, one vector per component.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn broadcast(v: Vec3) -> [std::arch::x86_64::__m256; 3] {
+    use std::arch::x86_64::*;
+    [
+        _mm256_set1_ps(v.x),
+        _mm256_set1_ps(v.y),
+        _mm256_set1_ps(v.z),
+    ]
 }
 
 /// Ambient plus Lambertian light on a surface with this normal (both sides lit), as a log.
