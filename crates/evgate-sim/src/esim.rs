@@ -68,35 +68,37 @@ impl PixelState {
         }
     }
 
-    /// Splits the state into bands of `rows_per_band` rows.
-    pub fn bands(&mut self, width: usize, rows_per_band: usize) -> Vec<PixelBand<'_>> {
-        let chunk = width * rows_per_band;
-        self.reference
-            .chunks_mut(chunk)
-            .zip(self.previous.chunks_mut(chunk))
-            .zip(self.previous_surface.chunks_mut(chunk))
-            .zip(self.threshold_on.chunks(chunk))
-            .zip(self.threshold_off.chunks(chunk))
-            .zip(self.last_event_us.chunks_mut(chunk))
-            .enumerate()
-            .map(
-                |(
-                    i,
-                    (
-                        ((((reference, previous), previous_surface), threshold_on), threshold_off),
-                        last_event_us,
-                    ),
-                )| PixelBand {
-                    first_pixel: i * chunk,
+    /// Splits the state into consecutive bands of `band_rows[k]` rows each (together at most
+    /// the state's rows).
+    pub fn bands(&mut self, width: usize, band_rows: &[usize]) -> Vec<PixelBand<'_>> {
+        let (mut reference, mut previous, mut previous_surface) = (
+            &mut self.reference[..],
+            &mut self.previous[..],
+            &mut self.previous_surface[..],
+        );
+        let (mut threshold_on, mut threshold_off, mut last_event_us) = (
+            &self.threshold_on[..],
+            &self.threshold_off[..],
+            &mut self.last_event_us[..],
+        );
+        let mut first_pixel = 0;
+        band_rows
+            .iter()
+            .map(|&rows| {
+                let pixels = rows * width;
+                let band = PixelBand {
+                    first_pixel,
                     width,
-                    reference,
-                    previous,
-                    previous_surface,
-                    threshold_on,
-                    threshold_off,
-                    last_event_us,
-                },
-            )
+                    reference: split_off_front(&mut reference, pixels),
+                    previous: split_off_front(&mut previous, pixels),
+                    previous_surface: split_off_front(&mut previous_surface, pixels),
+                    threshold_on: split_off_front_shared(&mut threshold_on, pixels),
+                    threshold_off: split_off_front_shared(&mut threshold_off, pixels),
+                    last_event_us: split_off_front(&mut last_event_us, pixels),
+                };
+                first_pixel += pixels;
+                band
+            })
             .collect()
     }
 
@@ -253,6 +255,20 @@ impl PixelBand<'_> {
     }
 }
 
+/// The first `len` elements of `slice`, which keeps the rest.
+pub(crate) fn split_off_front<'a, T>(slice: &mut &'a mut [T], len: usize) -> &'a mut [T] {
+    let (front, rest) = std::mem::take(slice).split_at_mut(len);
+    *slice = rest;
+    front
+}
+
+/// [`split_off_front`] for a shared slice.
+fn split_off_front_shared<'a, T>(slice: &mut &'a [T], len: usize) -> &'a [T] {
+    let (front, rest) = slice.split_at(len);
+    *slice = rest;
+    front
+}
+
 /// Pixels whose threshold tests [`list_crossing_blocks`] takes together.
 const BLOCK: usize = 8;
 
@@ -386,7 +402,7 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         let mut state = PixelState::new(&model(), &[0.0, 0.0], &[0, 0], &mut rng);
         let mut out = Vec::new();
-        let mut bands = state.bands(2, 1);
+        let mut bands = state.bands(2, &[1]);
         // Pixel 0 brightens by 0.5 log units (two ON events), pixel 1 darkens by 0.25 (one OFF).
         bands[0].emit(&[0.5, -0.25], &[0, 3], 1000, 2000, 0, &mut out);
         let times: Vec<(i64, bool, u16)> = out
@@ -462,7 +478,7 @@ mod tests {
         };
         let mut state = PixelState::new(&refractory, &[0.0], &[0], &mut rng);
         let mut out = Vec::new();
-        state.bands(1, 1)[0].emit(&[1.0], &[0], 0, 1000, 500, &mut out);
+        state.bands(1, &[1])[0].emit(&[1.0], &[0], 0, 1000, 500, &mut out);
         // Crossings at 200, 400, …, 1000 µs; each kept event silences the next 500 µs.
         let times: Vec<i64> = out.iter().map(|e| e.event.t).collect();
         assert_eq!(times, vec![200, 800]);
@@ -473,7 +489,7 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         let mut state = PixelState::new(&model(), &[0.0], &[2], &mut rng);
         let mut out = Vec::new();
-        state.bands(1, 1)[0].emit(&[-1.0], &[0], 0, 100, 0, &mut out);
+        state.bands(1, &[1])[0].emit(&[-1.0], &[0], 0, 100, 0, &mut out);
         assert!(!out.is_empty() && out.iter().all(|e| e.label == 2 && !e.event.is_on()));
     }
 }

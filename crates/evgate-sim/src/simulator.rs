@@ -21,7 +21,7 @@ use serde::Serialize;
 
 use crate::camera::{project_world, Intrinsics};
 use crate::config::SimConfig;
-use crate::esim::{LabelledEvent, PixelBand, PixelState};
+use crate::esim::{split_off_front, LabelledEvent, PixelBand, PixelState};
 use crate::event_sort::EventSorter;
 use crate::noise::NoiseSource;
 use crate::preset::Preset;
@@ -32,9 +32,10 @@ use crate::world::build_scene;
 /// Rendering probes image motion over this interval to choose the next step (of the static
 /// world or of the objects).
 const MOTION_PROBE_US: i64 = 1_000;
-/// Row bands per worker thread in a render step: several, so that the cost of expensive
-/// rows spreads over the workers.
-const BANDS_PER_THREAD: usize = 8;
+/// A step's next band takes this share of the rows left per worker (see [`band_rows`]).
+const BAND_SHARE_DIVISOR: usize = 2;
+/// Fewest rows in a band (but the last): smaller bands cost more to hand out than they save.
+const MIN_BAND_ROWS: usize = 4;
 /// Spacing of the pixel grid whose static-world points are followed by the motion probe.
 const MOTION_PROBE_GRID_PX: usize = 16;
 
@@ -103,9 +104,12 @@ pub struct Simulator {
     rendered_us: i64,
     delivered_us: i64,
     /// The last step's events, unsorted, in parts (one per worker, then the noise): the next
-    /// step sorts them into `pending` while its helpers render, or `advance` before it
-    /// delivers.
+    /// step sorts them into `pending` while its helpers render.
     unsorted: Vec<Vec<LabelledEvent>>,
+    /// The step whose events are in `unsorted`, if any: the simulator renders one step
+    /// ahead of the time it delivered, so that each step's sort overlaps the next step's
+    /// rendering.
+    unsorted_step: Option<UnsortedStep>,
     sorter: EventSorter,
     /// Emptied event buffers, kept with their capacity: allocated afresh every step, they
     /// cost page faults (large allocations come straight from the kernel).
@@ -203,6 +207,7 @@ impl Simulator {
             rendered_us: 0,
             delivered_us: 0,
             unsorted: Vec::new(),
+            unsorted_step: None,
             sorter: EventSorter::default(),
             spare_buffers: Mutex::new(Vec::new()),
             next_static_step_us: None,
@@ -253,6 +258,26 @@ impl Simulator {
     /// depend on how the time is split into calls.
     pub fn advance(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
         // Pending events precede those of every step still to come.
+        self.deliver_pending(t_end_us, out);
+        // Each step sorts the step before it, so the loop ends one step past `t_end_us`: the
+        // sort that a stream's every call needs then runs beside the helpers' rendering
+        // instead of after it, with the helpers idle.
+        while self.sorted_us() < t_end_us {
+            self.step(t_end_us, out);
+        }
+        self.deliver_pending(t_end_us, out);
+        self.delivered_us = self.delivered_us.max(t_end_us);
+        self.stats.simulated_us = self.delivered_us;
+    }
+
+    /// The time up to which every event is sorted (delivered or pending).
+    fn sorted_us(&self) -> i64 {
+        self.unsorted_step
+            .as_ref()
+            .map_or(self.rendered_us, |step| step.t0_us)
+    }
+
+    fn deliver_pending(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
         while let Some(next) = self.pending.front() {
             if next.event.t > t_end_us {
                 break;
@@ -262,20 +287,6 @@ impl Simulator {
             self.stats.record(std::slice::from_ref(&labelled));
             out.push(labelled);
         }
-        while self.rendered_us < t_end_us {
-            self.step(t_end_us, out);
-        }
-        deliver(
-            &mut self.unsorted,
-            &mut self.sorter,
-            &self.spare_buffers,
-            &mut self.pending,
-            t_end_us,
-            out,
-            &mut self.stats,
-        );
-        self.delivered_us = self.delivered_us.max(t_end_us);
-        self.stats.simulated_us = self.delivered_us;
     }
 
     /// One step of the static world, sized by its image motion, with the objects sampled at
@@ -311,23 +322,25 @@ impl Simulator {
             width,
             refractory_us: self.config.events.refractory_us,
         };
-        let rows_per_band = height.div_ceil(self.threads * BANDS_PER_THREAD);
+        let band_rows = band_rows(height, self.threads);
         let mut parts = Vec::with_capacity(self.threads + 1);
         {
-            let bands = self.state.bands(width, rows_per_band);
-            let chunk = width * rows_per_band;
-            let jobs = self
-                .background
-                .chunks(chunk)
-                .zip(self.next_background.chunks_mut(chunk))
-                .zip(bands)
-                .enumerate()
-                .map(|(i, ((background, next_background), band))| BandJob {
-                    first_row: i * rows_per_band,
-                    background,
-                    next_background,
+            let bands = self.state.bands(width, &band_rows);
+            let (mut background, mut next_background) =
+                (&self.background[..], &mut self.next_background[..]);
+            let mut first_row = 0;
+            let jobs = band_rows.iter().zip(bands).map(|(&rows, band)| {
+                let (band_background, rest) = background.split_at(rows * width);
+                background = rest;
+                let job = BandJob {
+                    first_row,
+                    background: band_background,
+                    next_background: split_off_front(&mut next_background, rows * width),
                     band,
-                });
+                };
+                first_row += rows;
+                job
+            });
             // Workers take the next band as they finish one, so that a worker with costlier
             // rows (objects, near floors) or less CPU (a shared machine) holds the step up
             // less than with bands dealt out in advance.
@@ -417,8 +430,15 @@ impl Simulator {
             .emit(t1, refractory, &mut self.state, &mut self.rng, noise);
         self.unsorted = parts;
         self.rendered_us = t1;
-        self.stats.renders += interval.samples.len() as u64 - 1;
-        self.stats.background_renders += 1;
+        // A step's renders count once its events are sorted: the counters then cover the
+        // time delivered, whatever was rendered ahead.
+        if let Some(sorted) = self.unsorted_step.replace(UnsortedStep {
+            t0_us: t0,
+            renders: interval.samples.len() as u64 - 1,
+        }) {
+            self.stats.renders += sorted.renders;
+            self.stats.background_renders += 1;
+        }
     }
 
     /// Largest image displacement of the points in `now` after [`MOTION_PROBE_US`] in
@@ -622,6 +642,13 @@ fn shift(a: (f32, f32), b: (f32, f32)) -> f32 {
     ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt()
 }
 
+/// A step rendered and not yet sorted.
+struct UnsortedStep {
+    t0_us: i64,
+    /// Instants sampled for events in the step.
+    renders: u64,
+}
+
 /// An instant at which the objects are sampled within a step of the static world.
 struct Sample<'a> {
     t_us: i64,
@@ -731,6 +758,22 @@ impl BandJob<'_> {
     }
 }
 
+/// Rows per band of a step, largest first: workers take bands as they finish one, and a
+/// worker that finds no band left waits for the others' last bands, which are therefore
+/// small (guided self-scheduling).
+fn band_rows(height: usize, threads: usize) -> Vec<usize> {
+    let mut rows = Vec::new();
+    let mut left = height;
+    while left > 0 {
+        let band = (left / (BAND_SHARE_DIVISOR * threads))
+            .max(MIN_BAND_ROWS)
+            .min(left);
+        rows.push(band);
+        left -= band;
+    }
+    rows
+}
+
 fn render_parallel(snapshot: &Snapshot<'_>, frame: &mut Frame, sensor: SensorSize, threads: usize) {
     let width = sensor.width as usize;
     let rows_per_band = (sensor.height as usize).div_ceil(threads.max(1));
@@ -746,4 +789,31 @@ fn render_parallel(snapshot: &Snapshot<'_>, frame: &mut Frame, sensor: SensorSiz
             scope.spawn(move || snapshot.render_rows(i * rows_per_band, log, surface, depth));
         }
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bands_cover_every_row_once_and_shrink_towards_the_end() {
+        for height in [1, 3, 4, 7, 60, 260, 480, 1000] {
+            for threads in [1, 2, 3, 16] {
+                let rows = band_rows(height, threads);
+                assert_eq!(
+                    rows.iter().sum::<usize>(),
+                    height,
+                    "{height} rows, {threads}"
+                );
+                assert!(rows.iter().all(|&r| r > 0));
+                assert!(
+                    rows.windows(2).all(|pair| pair[0] >= pair[1]),
+                    "{height} rows, {threads} threads: {rows:?}"
+                );
+                let last = *rows.last().expect("a band");
+                assert!(last <= MIN_BAND_ROWS.max(height / (BAND_SHARE_DIVISOR * threads)));
+            }
+        }
+        assert!(band_rows(260, 2).len() >= 2 * 2 * BAND_SHARE_DIVISOR);
+    }
 }
