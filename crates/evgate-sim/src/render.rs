@@ -835,7 +835,9 @@ impl<'a> Snapshot<'a> {
                 continue;
             }
             let plane = &self.panel_planes[row_panel.index];
-            if count == MOST_PLANES || !(plane.offset.abs() > NEAREST_PLANE_M) {
+            // NaN offsets fail the comparison too.
+            let far_enough = plane.offset.abs() > NEAREST_PLANE_M;
+            if count == MOST_PLANES || !far_enough {
                 return;
             }
             planes[count] = (
