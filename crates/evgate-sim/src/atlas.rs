@@ -1,12 +1,14 @@
 //! Every texel of every texture of a scene in one array, so that eight texture samples (of any
 //! textures and mip levels) are taken at once with AVX2: the arithmetic in 8-lane vectors, the
-//! texels read by eight scalar loads each (AMD Zen runs gather instructions as microcode,
-//! slower than the loads they are made of). The same operations in the same order as
-//! [`Texture::sample`], hence the same bits. Plain texels rather than the textures' 4-texel
-//! quads: each read fetches single values either way, and a quarter of the memory misses the
-//! caches less. Each level is stored in 4×4-texel tiles, one 64-byte cache
-//! line each: a bilinear footprint then mostly lies in one line, and a row of pixels crossing
-//! the texture in any direction touches fewer lines than with row-major texels.
+//! texels read by scalar loads (AMD Zen runs gather instructions as microcode, slower than the
+//! loads they are made of). The same operations in the same order as [`Texture::sample`],
+//! hence the same bits. Each texel is stored with its right-hand neighbour, so that one 8-byte
+//! load reads both texels of a bilinear footprint's row: half the loads, and half the lane
+//! index extractions that feed them, of single texels, for twice the memory (textures are
+//! small: a 256² texture's levels take 0.7 MB). Each level is stored in tiles of 4×4 such
+//! pairs, two 64-byte cache lines: a bilinear footprint then mostly lies in one tile, and a
+//! row of pixels crossing the texture in any direction touches fewer lines than with
+//! row-major texels.
 
 #[cfg(target_arch = "x86_64")]
 use crate::index_lanes::checked_first_and_uniform;
@@ -16,20 +18,23 @@ use crate::texture::Texture;
 const MAX_LEVELS: usize = 16;
 /// log2 of a tile's side in texels (levels narrower than a tile are one tile of their size).
 const TILE_LOG2: i32 = 2;
-/// Texels per tile: one cache line of `f32`.
+/// Texel pairs per tile: two cache lines.
 const TILE_TEXELS: usize = 1 << (2 * TILE_LOG2);
 
-/// One tile, aligned so that it is one cache line.
+/// A texel and its right-hand neighbour (wrapping around the level).
+type TexelPair = [f32; 2];
+
+/// One tile, aligned to cache lines.
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(64))]
-struct Tile([f32; TILE_TEXELS]);
+struct Tile([TexelPair; TILE_TEXELS]);
 
 /// The texels of all textures' mip levels, and where each level starts.
 #[derive(Clone, Debug, Default)]
 pub struct TextureAtlas {
-    /// Every level starts at a tile, and its texels are tiled (see [`tiled_index`]).
+    /// Every level starts at a tile, and its texel pairs are tiled (see [`tiled_index`]).
     tiles: Vec<Tile>,
-    /// Index (in texels) of level l of texture t at `t * MAX_LEVELS + l`.
+    /// Index (in texel pairs) of level l of texture t at `t * MAX_LEVELS + l`.
     level_starts: Vec<i32>,
     /// Per texture: log2 of the side of its level 0.
     size_log2: Vec<i32>,
@@ -73,7 +78,8 @@ impl TextureAtlas {
                 for (y, row) in texels.chunks_exact(side).enumerate() {
                     for (x, &texel) in row.iter().enumerate() {
                         let index = tiled_index(x, y, side_log2);
-                        storage[index / TILE_TEXELS].0[index % TILE_TEXELS] = texel;
+                        storage[index / TILE_TEXELS].0[index % TILE_TEXELS] =
+                            [texel, row[(x + 1) % side]];
                     }
                 }
             }
@@ -265,23 +271,30 @@ impl TextureAtlas {
                 ),
             )
         };
-        let (x0, x1) = (column(ix), column(_mm256_add_epi32(ix, one_i)));
+        let x0 = column(ix);
         let (row0, row1) = (row(iy), row(_mm256_add_epi32(iy, one_i)));
-        let base = self.tiles.as_ptr().cast::<f32>();
-        // Eight scalar loads rather than a gather instruction: AMD Zen executes gathers as
-        // microcode, slower than the loads it is made of.
-        let corner = |row: __m256i, x: __m256i| {
+        let base = self.tiles.as_ptr().cast::<TexelPair>();
+        // Both texels of a footprint row per lane, by scalar 8-byte loads (AMD Zen executes
+        // gathers as microcode, slower than the loads they are made of), two lanes to a
+        // 128-bit half, then split into the left and the right texels of the eight lanes.
+        let pairs = |row: __m256i| {
             let mut index = [0i32; 8];
-            _mm256_storeu_si256(index.as_mut_ptr().cast(), _mm256_add_epi32(row, x));
-            let texels = index.map(|i| *base.add(i as usize));
-            _mm256_loadu_ps(texels.as_ptr())
+            _mm256_storeu_si256(index.as_mut_ptr().cast(), _mm256_add_epi32(row, x0));
+            let two_lanes = |a: i32, b: i32| {
+                let low = _mm_load_sd(base.add(a as usize).cast::<f64>());
+                _mm_castpd_ps(_mm_loadh_pd(low, base.add(b as usize).cast::<f64>()))
+            };
+            let (lanes01, lanes23) = (two_lanes(index[0], index[1]), two_lanes(index[2], index[3]));
+            let (lanes45, lanes67) = (two_lanes(index[4], index[5]), two_lanes(index[6], index[7]));
+            let lanes0145 = _mm256_set_m128(lanes45, lanes01);
+            let lanes2367 = _mm256_set_m128(lanes67, lanes23);
+            (
+                _mm256_shuffle_ps::<0b10_00_10_00>(lanes0145, lanes2367),
+                _mm256_shuffle_ps::<0b11_01_11_01>(lanes0145, lanes2367),
+            )
         };
-        let corners = [
-            corner(row0, x0),
-            corner(row0, x1),
-            corner(row1, x0),
-            corner(row1, x1),
-        ];
+        let ((left0, right0), (left1, right1)) = (pairs(row0), pairs(row1));
+        let corners = [left0, right0, left1, right1];
         let corner = |k: usize| corners[k];
         let one = _mm256_set1_ps(1.0);
         let (gx, gy) = (_mm256_sub_ps(one, fx), _mm256_sub_ps(one, fy));
