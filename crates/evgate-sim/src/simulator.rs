@@ -277,16 +277,23 @@ impl Simulator {
             .map_or(self.rendered_us, |step| step.t0_us)
     }
 
+    /// Moves the pending events due by `t_end_us` (the queue is in time order) to `out`, in
+    /// bulk.
     fn deliver_pending(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
-        while let Some(next) = self.pending.front() {
-            if next.event.t > t_end_us {
-                break;
-            }
-            let labelled = *next;
-            self.pending.pop_front();
-            self.stats.record(std::slice::from_ref(&labelled));
-            out.push(labelled);
+        let due_at = |part: &[LabelledEvent]| part.partition_point(|e| e.event.t <= t_end_us);
+        let (front, back) = self.pending.as_slices();
+        let due_front = due_at(front);
+        let due = if due_front < front.len() {
+            [&front[..due_front], &[][..]]
+        } else {
+            [front, &back[..due_at(back)]]
+        };
+        for part in due {
+            self.stats.record(part);
+            out.extend_from_slice(part);
         }
+        let count = due[0].len() + due[1].len();
+        self.pending.drain(..count);
     }
 
     /// One step of the static world, sized by its image motion, with the objects sampled at
