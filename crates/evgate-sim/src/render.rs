@@ -541,19 +541,32 @@ impl<'a> Snapshot<'a> {
     /// `shade` compute, pixel by pixel without the objects.
     #[inline(always)]
     fn shade_panels<const GATHER: bool>(&self, scratch: &RowScratch, log_intensity: &mut [f32]) {
-        let width = log_intensity.len();
-        let blocks_end = if GATHER { width / 8 * 8 } else { 0 };
-        for start in (0..blocks_end).step_by(8) {
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: `GATHER` is set only by `render_rows_avx2`, which runs where the CPU
-            // has AVX2.
-            unsafe {
-                self.shade_panels8(scratch, start, &mut log_intensity[start..start + 8])
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            unreachable!("GATHER is set only by the x86-64 AVX2 build");
+        if GATHER {
+            for (start, block) in (0..).step_by(8).zip(log_intensity.chunks_mut(8)) {
+                // The row's last block may be partial: its lanes past the row end are dark
+                // (the search arrays are padded to whole blocks) and are not kept.
+                let mut partial = [0.0f32; 8];
+                let lanes = if block.len() == 8 {
+                    &mut block[..]
+                } else {
+                    &mut partial[..]
+                };
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: `GATHER` is set only by `render_rows_avx2`, which runs where the CPU
+                // has AVX2.
+                unsafe {
+                    self.shade_panels8(scratch, start, lanes)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                unreachable!("GATHER is set only by the x86-64 AVX2 build");
+                if block.len() < 8 {
+                    let kept = block.len();
+                    block.copy_from_slice(&partial[..kept]);
+                }
+            }
+            return;
         }
-        for (c, log) in log_intensity.iter_mut().enumerate().skip(blocks_end) {
+        for (c, log) in log_intensity.iter_mut().enumerate() {
             *log = match self.panel_texel(scratch, c) {
                 None => LOG_DARK,
                 Some(texel) => {
