@@ -158,8 +158,8 @@ impl PixelBand<'_> {
 
     /// [`PixelBand::emit_pixel`] on the static world (surface 0) for the band's pixels
     /// `pixels`, whose values at `t1_us` are `log_intensity`. The threshold tests run over
-    /// blocks of pixels, eight per vector compare ([`list_crossing_blocks`]); only blocks with
-    /// a crossing are visited pixel by pixel.
+    /// blocks of pixels, eight per vector compare ([`list_crossing_blocks`]), which lists the
+    /// pixels that cross: only those are visited.
     pub fn emit_static_run(
         &mut self,
         pixels: Range<usize>,
@@ -176,7 +176,7 @@ impl PixelBand<'_> {
         let first = pixels.start;
         for chunk_start in (0..pixels.len()).step_by(BLOCK * CHUNK_BLOCKS) {
             let chunk_end = (chunk_start + BLOCK * CHUNK_BLOCKS).min(pixels.len());
-            let mut crossing_blocks = [0usize; CHUNK_BLOCKS];
+            let mut crossing_blocks = [CrossingBlock::default(); CHUNK_BLOCKS];
             let chunk = first + chunk_start..first + chunk_end;
             let crossings = list_crossing_blocks(
                 &log_intensity[chunk_start..chunk_end],
@@ -185,22 +185,21 @@ impl PixelBand<'_> {
                 &self.threshold_off[chunk],
                 &mut crossing_blocks,
             );
-            for start in &mut crossing_blocks[..crossings] {
-                *start += chunk_start;
-                let block = first + *start..first + (*start + BLOCK).min(chunk_end);
-                prefetch(&self.last_event_us[block.start]);
-                prefetch(&self.last_event_us[block.end - 1]);
-                prefetch(&self.previous[block.start]);
+            let crossing_blocks = &crossing_blocks[..crossings];
+            for block in crossing_blocks {
+                let start = first + chunk_start + block.start;
+                let end = (start + BLOCK).min(first + chunk_end);
+                prefetch(&self.last_event_us[start]);
+                prefetch(&self.last_event_us[end - 1]);
+                prefetch(&self.previous[start]);
             }
-            for &start in &crossing_blocks[..crossings] {
-                let end = (start + BLOCK).min(chunk_end);
-                for (i, &l1) in (first + start..).zip(&log_intensity[start..end]) {
-                    let reference = self.reference[i];
-                    if l1 - reference >= self.threshold_on[i]
-                        || reference - l1 >= self.threshold_off[i]
-                    {
-                        self.fire(i, l1, 0, t0_us, t1_us, refractory_us, out);
-                    }
+            for block in crossing_blocks {
+                let mut lanes = block.lanes;
+                while lanes != 0 {
+                    let offset = chunk_start + block.start + lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    let l1 = log_intensity[offset];
+                    self.fire(first + offset, l1, 0, t0_us, t1_us, refractory_us, out);
                 }
             }
         }
@@ -272,15 +271,24 @@ fn split_off_front_shared<'a, T>(slice: &mut &'a [T], len: usize) -> &'a [T] {
 /// Pixels whose threshold tests [`list_crossing_blocks`] takes together.
 const BLOCK: usize = 8;
 
-/// Writes to `blocks` the offset of each block of [`BLOCK`] pixels (the last may be shorter)
-/// in which some pixel crosses a threshold on its way from `reference` to `log_intensity`,
-/// and returns how many there are (`blocks` must have room for every block).
+/// A block of [`BLOCK`] pixels in which some pixel crosses a threshold.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct CrossingBlock {
+    /// Offset of the block's first pixel.
+    start: usize,
+    /// Bit k set where pixel `start + k` crosses.
+    lanes: u8,
+}
+
+/// Writes to `blocks` each block of [`BLOCK`] pixels (the last may be shorter) in which some
+/// pixel crosses a threshold on its way from `reference` to `log_intensity`, with the pixels
+/// that do, and returns how many there are (`blocks` must have room for every block).
 fn list_crossing_blocks(
     log_intensity: &[f32],
     reference: &[f32],
     on: &[f32],
     off: &[f32],
-    blocks: &mut [usize],
+    blocks: &mut [CrossingBlock],
 ) -> usize {
     let n = log_intensity.len();
     assert!(reference.len() == n && on.len() == n && off.len() == n);
@@ -306,12 +314,13 @@ fn list_crossing_blocks(
     let (mut count, scalar_from) = (0, 0);
     for start in (scalar_from..n).step_by(BLOCK) {
         let end = (start + BLOCK).min(n);
-        let crossing = (start..end).fold(false, |any, i| {
+        let lanes = (start..end).fold(0u8, |lanes, i| {
             let (l1, reference) = (log_intensity[i], reference[i]);
-            any | (l1 - reference >= on[i]) | (reference - l1 >= off[i])
+            let crosses = (l1 - reference >= on[i]) | (reference - l1 >= off[i]);
+            lanes | (u8::from(crosses) << (i - start))
         });
-        if crossing {
-            blocks[count] = start;
+        if lanes != 0 {
+            blocks[count] = CrossingBlock { start, lanes };
             count += 1;
         }
     }
@@ -319,7 +328,7 @@ fn list_crossing_blocks(
 }
 
 /// [`list_crossing_blocks`] for whole blocks (`log_intensity.len()` a multiple of [`BLOCK`]),
-/// eight pixels per vector compare: the same tests, so the same blocks.
+/// eight pixels per vector compare: the same tests, so the same blocks and pixels.
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -330,7 +339,7 @@ unsafe fn list_whole_crossing_blocks_avx2(
     reference: &[f32],
     on: &[f32],
     off: &[f32],
-    blocks: &mut [usize],
+    blocks: &mut [CrossingBlock],
 ) -> usize {
     use std::arch::x86_64::*;
     let n = log_intensity.len();
@@ -349,9 +358,10 @@ unsafe fn list_whole_crossing_blocks_avx2(
             _mm256_sub_ps(reference, l1),
             _mm256_loadu_ps(off.as_ptr().add(start)),
         );
+        let lanes = _mm256_movemask_ps(_mm256_or_ps(brighter, darker)) as u8;
         // Written whether or not the block crosses, so that the loop does not branch.
-        blocks[count] = start;
-        count += (_mm256_movemask_ps(_mm256_or_ps(brighter, darker)) != 0) as usize;
+        blocks[count] = CrossingBlock { start, lanes };
+        count += (lanes != 0) as usize;
     }
     count
 }
@@ -416,7 +426,7 @@ mod tests {
     }
 
     #[test]
-    fn crossing_blocks_are_those_with_a_pixel_past_a_threshold() {
+    fn crossing_blocks_list_the_pixels_past_a_threshold() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         for n in [0, 1, 7, 8, 9, 64, 100, 346] {
             let draw = |rng: &mut ChaCha8Rng, range: std::ops::Range<f32>| -> Vec<f32> {
@@ -433,19 +443,29 @@ mod tests {
                     r + rng.gen_range(-change..change)
                 })
                 .collect();
-            let expected: Vec<usize> = (0..n)
+            let expected: Vec<CrossingBlock> = (0..n)
                 .step_by(BLOCK)
-                .filter(|&start| {
-                    (start..(start + BLOCK).min(n))
-                        .any(|i| log[i] - reference[i] >= on[i] || reference[i] - log[i] >= off[i])
+                .map(|start| CrossingBlock {
+                    start,
+                    lanes: (start..(start + BLOCK).min(n))
+                        .filter(|&i| {
+                            log[i] - reference[i] >= on[i] || reference[i] - log[i] >= off[i]
+                        })
+                        .map(|i| 1u8 << (i - start))
+                        .sum(),
                 })
+                .filter(|block| block.lanes != 0)
                 .collect();
-            let mut blocks = vec![usize::MAX; n.div_ceil(BLOCK)];
+            let mut blocks = vec![CrossingBlock::default(); n.div_ceil(BLOCK)];
             let count = list_crossing_blocks(&log, &reference, &on, &off, &mut blocks);
             assert_eq!(&blocks[..count], &expected[..], "{n} pixels");
             assert!(
                 n < 64 || (0 < count && count < n / BLOCK),
                 "{n} pixels: {count} crossing"
+            );
+            assert!(
+                expected.iter().any(|block| block.lanes.count_ones() == 1) || n < 64,
+                "{n} pixels: no block with a single crossing pixel"
             );
         }
     }
