@@ -61,14 +61,10 @@ impl EventSorter {
             self.sorted[*slot as usize] = *labelled;
             *slot += 1;
         }
+        // Each slot now holds where its microsecond's events end (the next one's start).
         let mut start = 0;
-        while start < self.sorted.len() {
-            let t = self.sorted[start].event.t;
-            let end = start
-                + self.sorted[start..]
-                    .iter()
-                    .position(|labelled| labelled.event.t != t)
-                    .unwrap_or(self.sorted.len() - start);
+        for &end in &self.slots[..=span as usize] {
+            let end = end as usize;
             if end - start > 1 {
                 self.sorted[start..end]
                     .sort_by_key(|labelled| (labelled.event.y, labelled.event.x));
