@@ -4,7 +4,9 @@
 //! `cargo bench -p evgate-benches --bench sim` runs criterion over 20 ms slices of simulated
 //! time (one simulator per preset keeps advancing, so every slice is a steady-state slice), then
 //! times one continuous second per preset, streamed in 1 ms chunks as `evgate-ingest` streams
-//! the simulated camera, and writes the real-time factors as JSON to
+//! the simulated camera, from a fresh simulator `EVGATE_BENCH_REPEATS` times (default 3: the
+//! same work each time, so their spread is the machine's; the run of median wall time is
+//! reported, with every run's factor), and writes the real-time factors as JSON to
 //! `target/bench-results/sim.json` (override with `EVGATE_BENCH_JSON`). Restrict the cores with
 //! `taskset -c 0,1` to measure on 2 cores; the simulator uses every core it is allowed. The
 //! JSON also gives the CPU time, which a shared machine's load distorts much less than the wall
@@ -15,7 +17,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, Criterion, Throughput};
-use evgate_sim::{Preset, Simulator};
+use evgate_core::SensorSize;
+use evgate_sim::{Preset, SimStats, Simulator};
 use serde::Serialize;
 
 const SLICE_US: i64 = 20_000;
@@ -69,8 +72,11 @@ struct PresetSpeed {
     width: u16,
     height: u16,
     simulated_s: f64,
+    /// Of the run with the median wall time (the figures below are that run's too).
     wall_s: f64,
     realtime_factor: f64,
+    /// Every run's real-time factor, in the order run.
+    realtime_factor_runs: Vec<f64>,
     /// User + system CPU time of the whole process while simulating.
     cpu_s: f64,
     /// Simulated seconds per CPU second: on a machine shared with other jobs the wall time
@@ -98,7 +104,7 @@ struct Report {
 }
 
 /// One continuous simulated second per preset, streamed in [`STREAM_CHUNK_US`] chunks and timed
-/// end to end (scene setup excluded).
+/// end to end (scene setup excluded), repeated from a fresh simulator.
 fn realtime_report() -> Report {
     let load_average_before = load_average();
     // A shorter run suits instruction counting under callgrind, which is ~50× slower.
@@ -106,32 +112,34 @@ fn realtime_report() -> Report {
         .ok()
         .and_then(|ms| ms.parse::<i64>().ok())
         .map_or(1_000_000, |ms| ms * 1000);
+    let repeats = std::env::var("EVGATE_BENCH_REPEATS")
+        .ok()
+        .and_then(|n| n.parse::<usize>().ok())
+        .unwrap_or(3)
+        .max(1);
     let presets = presets()
         .into_iter()
         .map(|preset| {
-            let mut simulator = Simulator::from_preset(preset, SEED);
-            let mut events = Vec::new();
-            let cpu_before = process_cpu_s();
-            let started = Instant::now();
-            let mut t = 0;
-            while t < simulated_us {
-                t = (t + STREAM_CHUNK_US).min(simulated_us);
-                // Consumed as they come, as by the ingest service: kept, a second of events
-                // (60 MB for `fast`) cost the run its allocation and page faults.
-                events.clear();
-                simulator.advance(t, &mut events);
-            }
-            let wall_s = started.elapsed().as_secs_f64();
-            let cpu_s = process_cpu_s() - cpu_before;
-            let stats = simulator.stats();
+            let mut runs: Vec<TimedRun> = (0..repeats)
+                .map(|_| time_one_run(preset, simulated_us))
+                .collect();
             let simulated_s = simulated_us as f64 * 1e-6;
+            let realtime_factor_runs = runs.iter().map(|run| simulated_s / run.wall_s).collect();
+            runs.sort_by(|a, b| a.wall_s.total_cmp(&b.wall_s));
+            let TimedRun {
+                stats,
+                sensor,
+                wall_s,
+                cpu_s,
+            } = runs.swap_remove(runs.len() / 2);
             PresetSpeed {
                 preset: preset.name(),
-                width: simulator.sensor().width,
-                height: simulator.sensor().height,
+                width: sensor.width,
+                height: sensor.height,
                 simulated_s,
                 wall_s,
                 realtime_factor: simulated_s / wall_s,
+                realtime_factor_runs,
                 cpu_s,
                 simulated_s_per_cpu_s: simulated_s / cpu_s,
                 renders_per_simulated_s: stats.renders as f64 / simulated_s,
@@ -149,6 +157,36 @@ fn realtime_report() -> Report {
         load_average_before,
         load_average_after: load_average(),
         presets,
+    }
+}
+
+/// One timed run of a preset: its times and the simulator's counters (the simulator, with its
+/// helper threads, is gone before the next run).
+struct TimedRun {
+    stats: SimStats,
+    sensor: SensorSize,
+    wall_s: f64,
+    cpu_s: f64,
+}
+
+fn time_one_run(preset: Preset, simulated_us: i64) -> TimedRun {
+    let mut simulator = Simulator::from_preset(preset, SEED);
+    let mut events = Vec::new();
+    let cpu_before = process_cpu_s();
+    let started = Instant::now();
+    let mut t = 0;
+    while t < simulated_us {
+        t = (t + STREAM_CHUNK_US).min(simulated_us);
+        // Consumed as they come, as by the ingest service: kept, a second of events (60 MB
+        // for `fast`) cost the run its allocation and page faults.
+        events.clear();
+        simulator.advance(t, &mut events);
+    }
+    TimedRun {
+        wall_s: started.elapsed().as_secs_f64(),
+        cpu_s: process_cpu_s() - cpu_before,
+        stats: simulator.stats(),
+        sensor: simulator.sensor(),
     }
 }
 
@@ -185,12 +223,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         report.threads, report.load_average_before, report.load_average_after
     );
     for p in &report.presets {
+        let runs: Vec<String> = p
+            .realtime_factor_runs
+            .iter()
+            .map(|factor| format!("{factor:.2}"))
+            .collect();
         println!(
-            "{:>9} {}x{}: {:.2}x real time ({:.2} s wall, {:.2} CPU s per simulated s), {:.0} renders/s ({:.0} of the static world), {:.2} M events/s, {:.1} % object events",
+            "{:>9} {}x{}: {:.2}x real time (runs: {}; {:.2} s wall, {:.2} CPU s per simulated s), {:.0} renders/s ({:.0} of the static world), {:.2} M events/s, {:.1} % object events",
             p.preset,
             p.width,
             p.height,
             p.realtime_factor,
+            runs.join(", "),
             p.wall_s / p.simulated_s,
             p.cpu_s / p.simulated_s,
             p.renders_per_simulated_s,
