@@ -262,7 +262,7 @@ pub(crate) fn split_off_front<'a, T>(slice: &mut &'a mut [T], len: usize) -> &'a
 }
 
 /// [`split_off_front`] for a shared slice.
-fn split_off_front_shared<'a, T>(slice: &mut &'a [T], len: usize) -> &'a [T] {
+pub(crate) fn split_off_front_shared<'a, T>(slice: &mut &'a [T], len: usize) -> &'a [T] {
     let (front, rest) = slice.split_at(len);
     *slice = rest;
     front

@@ -21,7 +21,7 @@ use serde::Serialize;
 
 use crate::camera::{project_world, Intrinsics};
 use crate::config::SimConfig;
-use crate::esim::{split_off_front, LabelledEvent, PixelBand, PixelState};
+use crate::esim::{split_off_front, split_off_front_shared, LabelledEvent, PixelBand, PixelState};
 use crate::event_sort::EventSorter;
 use crate::noise::NoiseSource;
 use crate::preset::Preset;
@@ -337,11 +337,9 @@ impl Simulator {
                 (&self.background[..], &mut self.next_background[..]);
             let mut first_row = 0;
             let jobs = band_rows.iter().zip(bands).map(|(&rows, band)| {
-                let (band_background, rest) = background.split_at(rows * width);
-                background = rest;
                 let job = BandJob {
                     first_row,
-                    background: band_background,
+                    background: split_off_front_shared(&mut background, rows * width),
                     next_background: split_off_front(&mut next_background, rows * width),
                     band,
                 };
