@@ -261,6 +261,19 @@ impl RowDirections {
     fn at(&self, column: usize) -> Vec3 {
         Vec3::new(self.x[column], self.y[column], self.z[column])
     }
+
+    /// The directions of columns `start..start + 8`, one vector per component.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn block8(&self, start: usize) -> [std::arch::x86_64::__m256; 3] {
+        [&self.x, &self.y, &self.z].map(|component| {
+            std::arch::x86_64::_mm256_loadu_ps(component[start..start + 8].as_ptr())
+        })
+    }
 }
 
 impl<'a> Snapshot<'a> {
@@ -634,12 +647,7 @@ impl<'a> Snapshot<'a> {
                 )
             }
         };
-        let [dx, dy, dz] = [
-            &scratch.directions.x,
-            &scratch.directions.y,
-            &scratch.directions.z,
-        ]
-        .map(|component| _mm256_loadu_ps(component[block.clone()].as_ptr()));
+        let [dx, dy, dz] = scratch.directions.block8(block.start);
         let t = _mm256_loadu_ps(scratch.nearest_depth[block].as_ptr());
         let camera = self.camera.translation;
         // relative = camera + direction · t − panel origin, per component.
@@ -1308,12 +1316,7 @@ impl<'a> Snapshot<'a> {
         use std::arch::x86_64::*;
         assert!(log_intensity.len() == LANES && surface.len() == LANES);
         let block = k..k + LANES;
-        let [dx, dy, dz] = [
-            &scratch.directions.x,
-            &scratch.directions.y,
-            &scratch.directions.z,
-        ]
-        .map(|component| _mm256_loadu_ps(component[block.clone()].as_ptr()));
+        let [dx, dy, dz] = scratch.directions.block8(block.start);
         let depth_limit = _mm256_loadu_ps(scratch.nearest_depth[block].as_ptr());
         let hits = self.nearest_objects8(first_column, [dx, dy, dz], depth_limit, scratch);
         let hit = _mm256_cmpgt_epi32(hits.id, _mm256_setzero_si256());
