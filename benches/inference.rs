@@ -213,7 +213,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let input = runtime.input_size();
     // The largest sensor that pads to the model's input is the one it was exported for in
     // practice (346 × 260 → 352 × 272); use the DAVIS346 size when it fits.
-    let sensor = if SensorSize::new(346, 260).padded_to(16) == input {
+    let sensor = if SensorSize::new(346, 260).padded_to(16) == Some(input) {
         SensorSize::new(346, 260)
     } else {
         input

@@ -5,6 +5,11 @@ use iceoryx2::prelude::ZeroCopySend;
 /// Polarity of a brightness change: `1` = ON (brighter), `0` = OFF (darker).
 pub type Polarity = u8;
 
+/// The largest event time, in microseconds (2^60, about 36 600 years), that decoders deliver
+/// and services accept; its negative is the smallest. Stream-time arithmetic (batch spans,
+/// horizons, prediction ages) on times within it cannot overflow.
+pub const MAX_EVENT_TIME_US: i64 = 1 << 60;
+
 /// One event: time in microseconds, pixel coordinates, polarity.
 ///
 /// The layout matches AEDAT4 / dv-processing (16 bytes, 8-byte aligned) so a slice of events can

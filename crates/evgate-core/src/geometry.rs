@@ -32,12 +32,16 @@ impl SensorSize {
     }
 
     /// The smallest size whose sides are multiples of `multiple` and at least this size
-    /// (the network's encoder halves the resolution four times, so it needs multiples of 16).
-    pub const fn padded_to(&self, multiple: u16) -> SensorSize {
-        SensorSize {
-            width: self.width.div_ceil(multiple) * multiple,
-            height: self.height.div_ceil(multiple) * multiple,
-        }
+    /// (the network's encoder halves the resolution four times, so it needs multiples of 16);
+    /// `None` where a side would pass 65 535.
+    pub const fn padded_to(&self, multiple: u16) -> Option<SensorSize> {
+        let (Some(width), Some(height)) = (
+            self.width.div_ceil(multiple).checked_mul(multiple),
+            self.height.div_ceil(multiple).checked_mul(multiple),
+        ) else {
+            return None;
+        };
+        Some(SensorSize { width, height })
     }
 }
 
@@ -55,11 +59,22 @@ mod tests {
     fn padding_rounds_up_to_multiple() {
         assert_eq!(
             SensorSize::new(346, 260).padded_to(16),
-            SensorSize::new(352, 272)
+            Some(SensorSize::new(352, 272))
         );
         assert_eq!(
             SensorSize::new(640, 480).padded_to(16),
-            SensorSize::new(640, 480)
+            Some(SensorSize::new(640, 480))
+        );
+    }
+
+    /// A text file without geometry reads as 65535 × 65535, which used to pad to 0 × 0.
+    #[test]
+    fn padding_past_the_largest_side_is_none() {
+        assert_eq!(SensorSize::new(u16::MAX, u16::MAX).padded_to(16), None);
+        assert_eq!(SensorSize::new(65_521, 8).padded_to(16), None);
+        assert_eq!(
+            SensorSize::new(65_520, 1).padded_to(16),
+            Some(SensorSize::new(65_520, 16))
         );
     }
 

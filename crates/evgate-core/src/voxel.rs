@@ -16,6 +16,11 @@ pub enum VoxelError {
     ZeroBins,
     #[error("voxel grid needs a non-empty sensor, got {sensor}")]
     EmptySensor { sensor: SensorSize },
+    #[error(
+        "voxel grid cannot pad a {sensor} sensor to multiples of {PADDING_MULTIPLE}: a side \
+         would pass 65535 (is the sensor size known? text event files need --sensor)"
+    )]
+    SensorTooLarge { sensor: SensorSize },
 }
 
 /// How many events one [`VoxelGrid::accumulate`] call splatted or skipped.
@@ -65,7 +70,9 @@ impl VoxelGrid {
         if sensor.pixels() == 0 {
             return Err(VoxelError::EmptySensor { sensor });
         }
-        let padded = sensor.padded_to(PADDING_MULTIPLE);
+        let padded = sensor
+            .padded_to(PADDING_MULTIPLE)
+            .ok_or(VoxelError::SensorTooLarge { sensor })?;
         Ok(Self {
             bins,
             sensor,
@@ -322,6 +329,14 @@ mod tests {
         let grid = VoxelGrid::new(SENSOR, 2).unwrap();
         assert_eq!(grid.shape(), [2, 16, 32]);
         assert_eq!(grid.as_slice().len(), 2 * 16 * 32);
+    }
+
+    #[test]
+    fn a_sensor_that_cannot_be_padded_is_an_error() {
+        let message = VoxelGrid::new(SensorSize::new(u16::MAX, u16::MAX), 2)
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("65535x65535"), "{message}");
     }
 
     #[test]

@@ -18,8 +18,14 @@ use crate::stream_decoder::{ChunkFormat, DecoderInput, StreamDecoder};
 pub const MAGIC: &[u8; 14] = b"#!AER-DAT4.0\r\n";
 /// A packet larger than this is taken for corruption rather than allocated.
 const MAX_PACKET_BYTES: usize = 256 * 1024 * 1024;
-/// Decompressed packets are capped too, so a corrupt stream cannot inflate without bound.
-const MAX_DECOMPRESSED_BYTES: u64 = 1024 * 1024 * 1024;
+/// A decompressed packet may hold at most this many bytes (4 M events; DV writes a few
+/// thousand per packet)...
+const MAX_DECOMPRESSED_BYTES: usize = 64 * 1024 * 1024;
+/// ...and at most this many times its compressed size (event records compress 2-5×), except
+/// that any packet may inflate to [`SMALL_PACKET_BYTES`]. Both bounds are applied while
+/// inflating, so a few KB of zstd never become a GiB in memory.
+const MAX_COMPRESSION_RATIO: usize = 100;
+const SMALL_PACKET_BYTES: usize = 1024 * 1024;
 const EVENT_BYTES: usize = 16;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -161,27 +167,8 @@ impl Aedat4Packets {
         body: &[u8],
         offset: u64,
     ) -> Result<(), DecodeError> {
-        self.packet.clear();
-        let result = match self.compression {
-            Compression::None => {
-                self.packet.extend_from_slice(body);
-                Ok(0)
-            }
-            Compression::Lz4 => lz4_flex::frame::FrameDecoder::new(body)
-                .take(MAX_DECOMPRESSED_BYTES)
-                .read_to_end(&mut self.packet),
-            Compression::Zstd => zstd::stream::read::Decoder::new(body)
-                .and_then(|d| d.take(MAX_DECOMPRESSED_BYTES).read_to_end(&mut self.packet)),
-        };
-        result.map(|_| ()).map_err(|e| {
-            input.malformed(
-                offset,
-                format!(
-                    "event packet does not decompress ({:?}): {e}",
-                    self.compression
-                ),
-            )
-        })
+        inflate(self.compression, body, &mut self.packet)
+            .map_err(|problem| input.malformed(offset, problem))
     }
 
     fn decode_packet(
@@ -215,6 +202,43 @@ impl Aedat4Packets {
 }
 
 /// Finds the event stream in the XML description: its id and, when given, its size.
+/// The most bytes a packet of `compressed` bytes may inflate to.
+fn decompressed_limit(compressed: usize) -> usize {
+    compressed
+        .saturating_mul(MAX_COMPRESSION_RATIO)
+        .max(SMALL_PACKET_BYTES)
+        .min(MAX_DECOMPRESSED_BYTES)
+}
+
+/// Decompresses one packet body into `packet`, stopping as soon as it passes its limit.
+fn inflate(compression: Compression, body: &[u8], packet: &mut Vec<u8>) -> Result<(), String> {
+    packet.clear();
+    let limit = decompressed_limit(body.len());
+    // One byte past the limit tells a packet at the limit from one beyond it.
+    let bounded = limit as u64 + 1;
+    let result = match compression {
+        Compression::None => {
+            packet.extend_from_slice(body);
+            Ok(0)
+        }
+        Compression::Lz4 => lz4_flex::frame::FrameDecoder::new(body)
+            .take(bounded)
+            .read_to_end(packet),
+        Compression::Zstd => zstd::stream::read::Decoder::new(body)
+            .and_then(|decoder| decoder.take(bounded).read_to_end(packet)),
+    };
+    result.map_err(|e| format!("event packet does not decompress ({compression:?}): {e}"))?;
+    if packet.len() > limit {
+        return Err(format!(
+            "event packet of {} compressed bytes ({compression:?}) inflates past {limit} bytes \
+             (limits: {MAX_COMPRESSION_RATIO}x its size, at least {SMALL_PACKET_BYTES} and at \
+             most {MAX_DECOMPRESSED_BYTES} bytes); taken for corruption",
+            body.len()
+        ));
+    }
+    Ok(())
+}
+
 fn event_stream(info: &str) -> Result<(i32, Option<SensorSize>), String> {
     let mut streams: Vec<(i32, String)> = Vec::new();
     for node in info.split("<node ").skip(1) {
@@ -279,6 +303,30 @@ mod tests {
         </node>
     </node>
 </dv>"#;
+
+    /// Issue 15: a few KB of zstd inflated to 1 GiB before anything was checked.
+    #[test]
+    fn packets_that_inflate_past_their_limit_are_errors() {
+        let zeros = vec![0u8; 64 * 1024 * 1024];
+        let bomb = zstd::encode_all(zeros.as_slice(), 19).unwrap();
+        assert!(bomb.len() < 64 * 1024, "{} bytes", bomb.len());
+        let mut packet = Vec::new();
+        let message = inflate(Compression::Zstd, &bomb, &mut packet).unwrap_err();
+        assert!(message.contains("inflates past"), "{message}");
+        // Inflating stopped at the limit instead of after the whole bomb.
+        assert!(packet.len() <= SMALL_PACKET_BYTES + 1, "{}", packet.len());
+        let lz4 = {
+            let mut encoder = lz4_flex::frame::FrameEncoder::new(Vec::new());
+            std::io::Write::write_all(&mut encoder, &zeros[..8 * 1024 * 1024]).unwrap();
+            encoder.finish().unwrap()
+        };
+        assert!(inflate(Compression::Lz4, &lz4, &mut packet).is_err());
+        // A packet within the limits inflates whole.
+        let events: Vec<u8> = (0..200_000u32).flat_map(|i| i.to_le_bytes()).collect();
+        let fine = zstd::encode_all(events.as_slice(), 3).unwrap();
+        inflate(Compression::Zstd, &fine, &mut packet).unwrap();
+        assert_eq!(packet, events);
+    }
 
     #[test]
     fn event_stream_and_size_come_from_the_description() {

@@ -98,6 +98,13 @@ pub fn parse_geometry(text: &str) -> Option<SensorSize> {
     .filter(|size| size.width > 0 && size.height > 0)
 }
 
+/// [`parse_geometry`] for a command-line `--sensor` value, with the error a user reads.
+pub fn parse_sensor_flag(text: &str) -> Result<SensorSize, String> {
+    parse_geometry(text).ok_or_else(|| {
+        format!("`{text}` is not a sensor size WxH with sides in 1..=65535 (e.g. 640x480)")
+    })
+}
+
 /// Sensor sizes of the Prophesee camera plugins whose recordings carry no geometry line
 /// (the sizes of the Gen3 VGA, Gen4.1/IMX636 HD and GenX320 sensors).
 fn sensor_of_plugin(plugin: &str) -> Option<SensorSize> {

@@ -24,6 +24,8 @@ pub enum NpyError {
         problem: String,
         header: String,
     },
+    #[error(".npy header of {length} bytes is longer than the {limit} accepted")]
+    HeaderTooLarge { length: usize, limit: usize },
     #[error("fortran-order arrays are not supported (save with np.ascontiguousarray)")]
     FortranOrder,
     #[error("dtype `{found}` is not the expected `{expected}`")]
@@ -306,6 +308,12 @@ pub fn read_header(reader: &mut impl Read) -> Result<NpyHeader, NpyError> {
         }
         _ => return Err(NpyError::UnsupportedVersion { major, minor }),
     };
+    if header_len > MAX_HEADER_BYTES {
+        return Err(NpyError::HeaderTooLarge {
+            length: header_len,
+            limit: MAX_HEADER_BYTES,
+        });
+    }
     let mut text = Vec::new();
     reader.take(header_len as u64).read_to_end(&mut text)?;
     if text.len() != header_len {
@@ -352,6 +360,17 @@ fn read_prefix(reader: &mut impl Read, buf: &mut [u8]) -> Result<(), NpyError> {
     Ok(())
 }
 
+/// The longest header read. NumPy refuses headers over 10 000 bytes by default (its
+/// `max_header_size`); a record dtype of many fields is the only large one in practice.
+const MAX_HEADER_BYTES: usize = 1 << 20;
+
+/// The deepest nesting of tuples and lists in a header: a record dtype's fields are two levels
+/// down, its sub-array shapes three; deeper is hostile (it once overflowed the stack).
+const MAX_HEADER_DEPTH: usize = 8;
+
+/// How much of a malformed header an error quotes.
+const QUOTED_HEADER_CHARS: usize = 200;
+
 /// A parser for the Python literal NumPy writes as the header: a dict with `descr`,
 /// `fortran_order` and `shape`.
 struct HeaderParser<'a> {
@@ -375,7 +394,7 @@ impl<'a> HeaderParser<'a> {
         NpyError::MalformedHeader {
             offset: self.pos,
             problem: problem.into(),
-            header: self.text.trim_end().to_owned(),
+            header: quoted(self.text.trim_end()),
         }
     }
 
@@ -418,12 +437,12 @@ impl<'a> HeaderParser<'a> {
         self.expect('{')?;
         let (mut descr, mut fortran, mut shape) = (None, None, None);
         while !self.eat('}') {
-            let key = match self.literal()? {
+            let key = match self.literal(0)? {
                 Literal::Str(key) => key,
                 _ => return Err(self.fail("expected a string key")),
             };
             self.expect(':')?;
-            let value = self.literal()?;
+            let value = self.literal(0)?;
             match key.as_str() {
                 "descr" => descr = Some(value),
                 "fortran_order" => fortran = Some(value),
@@ -490,7 +509,7 @@ impl<'a> HeaderParser<'a> {
         Ok(DType::Record(out))
     }
 
-    fn literal(&mut self) -> Result<Literal, NpyError> {
+    fn literal(&mut self, depth: usize) -> Result<Literal, NpyError> {
         self.skip_space();
         match self.peek() {
             Some(quote @ ('\'' | '"')) => {
@@ -503,11 +522,16 @@ impl<'a> HeaderParser<'a> {
                 Ok(Literal::Str(value))
             }
             Some(open @ ('(' | '[')) => {
+                if depth >= MAX_HEADER_DEPTH {
+                    return Err(self.fail(format!(
+                        "tuples and lists nested deeper than {MAX_HEADER_DEPTH} levels"
+                    )));
+                }
                 let close = if open == '(' { ')' } else { ']' };
                 self.pos += 1;
                 let mut items = Vec::new();
                 while !self.eat(close) {
-                    items.push(self.literal()?);
+                    items.push(self.literal(depth + 1)?);
                     if !self.eat(',') {
                         self.expect(close)?;
                         break;
@@ -540,6 +564,14 @@ impl<'a> HeaderParser<'a> {
                 Err(self.fail("expected a string, tuple, list, integer or boolean"))
             }
         }
+    }
+}
+
+/// `text`, cut to its first [`QUOTED_HEADER_CHARS`] characters.
+fn quoted(text: &str) -> String {
+    match text.char_indices().nth(QUOTED_HEADER_CHARS) {
+        Some((cut, _)) => format!("{}… ({} bytes in all)", &text[..cut], text.len()),
+        None => text.to_owned(),
     }
 }
 
@@ -592,6 +624,36 @@ mod tests {
         let array = NpyArray::from_slice(&[2], &[1u16, 2]);
         let err = array.to_vec::<i64>().unwrap_err().to_string();
         assert!(err.contains("<u2") && err.contains("<i8"), "{err}");
+    }
+
+    fn version_two(header: &str) -> Vec<u8> {
+        let mut bytes = b"\x93NUMPY\x02\x00".to_vec();
+        bytes.extend_from_slice(&(header.len() as u32).to_le_bytes());
+        bytes.extend_from_slice(header.as_bytes());
+        bytes
+    }
+
+    /// Issue 15: a header of 10^6 nested `[` overflowed the stack (`evgate info` aborted).
+    #[test]
+    fn deeply_nested_headers_are_errors_not_aborts() {
+        let deep = format!("{{{}", "[".repeat(1_000_000));
+        let error = NpyArray::read(&mut version_two(&deep).as_slice()).unwrap_err();
+        let message = error.to_string();
+        assert!(message.contains("nested deeper than 8"), "{message}");
+        assert!(message.len() < 1_000, "the error quotes the whole header");
+        // Eight levels still parse: a record dtype needs three.
+        let nested = "{'descr': [('a', '<i8')], 'fortran_order': False, 'shape': (0,), }";
+        assert!(HeaderParser::new(nested).parse().is_ok());
+    }
+
+    #[test]
+    fn headers_past_the_limit_are_refused_before_reading() {
+        let mut bytes = b"\x93NUMPY\x02\x00".to_vec();
+        bytes.extend_from_slice(&u32::MAX.to_le_bytes());
+        assert!(matches!(
+            NpyArray::read(&mut bytes.as_slice()),
+            Err(NpyError::HeaderTooLarge { .. })
+        ));
     }
 
     #[test]

@@ -3,12 +3,17 @@
 //! Policy (the same for every format):
 //! - an event outside the sensor is dropped and counted (`dropped_out_of_sensor`, with the byte
 //!   offset of the first one);
+//! - an event whose time lies outside ±[`MAX_EVENT_TIME_US`] (about 36 600 years) is dropped and
+//!   counted (`dropped_out_of_time_range`, with the byte offset of the first one): no camera
+//!   writes such a time, and downstream arithmetic on stream time (batch spans, horizons) must
+//!   not overflow;
 //! - an event earlier than the one before it is kept unchanged and counted (`time_regressions`,
 //!   with the index of the first such event among the delivered ones and the largest step back);
 //! - a word of an unknown or unsupported type is skipped and counted (`skipped_words`, with the
 //!   byte offset of the first one);
 //! - everything else that is wrong (bad magic or header, truncation, unparsable text) is an error.
 
+pub use evgate_core::MAX_EVENT_TIME_US;
 use evgate_core::{Event, SensorSize};
 use serde::Serialize;
 
@@ -19,6 +24,8 @@ pub struct DecodeReport {
     pub events: u64,
     pub dropped_out_of_sensor: u64,
     pub first_out_of_sensor_offset: Option<u64>,
+    pub dropped_out_of_time_range: u64,
+    pub first_out_of_time_range_offset: Option<u64>,
     pub time_regressions: u64,
     pub first_time_regression_index: Option<u64>,
     pub largest_time_regression_us: i64,
@@ -29,7 +36,10 @@ pub struct DecodeReport {
 impl DecodeReport {
     /// True when nothing was dropped, skipped or found out of order.
     pub fn is_clean(&self) -> bool {
-        self.dropped_out_of_sensor == 0 && self.time_regressions == 0 && self.skipped_words == 0
+        self.dropped_out_of_sensor == 0
+            && self.dropped_out_of_time_range == 0
+            && self.time_regressions == 0
+            && self.skipped_words == 0
     }
 
     pub fn skip_word(&mut self, offset: u64) {
@@ -64,6 +74,13 @@ impl Admission {
         if !self.sensor_size.contains(&event) {
             self.report.dropped_out_of_sensor += 1;
             self.report.first_out_of_sensor_offset.get_or_insert(offset);
+            return;
+        }
+        if event.t.unsigned_abs() > MAX_EVENT_TIME_US.unsigned_abs() {
+            self.report.dropped_out_of_time_range += 1;
+            self.report
+                .first_out_of_time_range_offset
+                .get_or_insert(offset);
             return;
         }
         if let Some(last_t) = self.last_t {
@@ -108,13 +125,32 @@ mod tests {
     }
 
     #[test]
-    fn a_regression_across_the_whole_i64_range_saturates() {
-        // Found by the `native` and `aedat4` fuzz targets: the step back overflowed.
+    fn a_regression_across_the_whole_time_range_is_counted() {
         let mut admission = Admission::new(SensorSize::new(4, 4));
         let mut out = Vec::new();
-        admission.admit(&mut out, Event::new(i64::MAX, 0, 0, true), 0);
-        admission.admit(&mut out, Event::new(i64::MIN, 0, 0, true), 16);
-        assert_eq!(admission.report.largest_time_regression_us, i64::MAX);
+        admission.admit(&mut out, Event::new(MAX_EVENT_TIME_US, 0, 0, true), 0);
+        admission.admit(&mut out, Event::new(-MAX_EVENT_TIME_US, 0, 0, true), 16);
+        assert_eq!(
+            admission.report.largest_time_regression_us,
+            2 * MAX_EVENT_TIME_US
+        );
         assert_eq!(admission.report.time_regressions, 1);
+    }
+
+    /// Issue 15: a CSV time near i64::MAX made evgate-ingest loop forever on batch spans that
+    /// overflowed.
+    #[test]
+    fn times_past_the_range_are_dropped_and_counted() {
+        let mut admission = Admission::new(SensorSize::new(4, 4));
+        let mut out = Vec::new();
+        admission.admit(&mut out, Event::new(5, 0, 0, true), 0);
+        admission.admit(&mut out, Event::new(9_223_372_036_854_775_000, 1, 1, true), 20);
+        admission.admit(&mut out, Event::new(i64::MIN, 1, 1, true), 40);
+        admission.admit(&mut out, Event::new(6, 0, 0, true), 60);
+        assert_eq!(out, vec![Event::new(5, 0, 0, true), Event::new(6, 0, 0, true)]);
+        assert_eq!(admission.report.dropped_out_of_time_range, 2);
+        assert_eq!(admission.report.first_out_of_time_range_offset, Some(20));
+        assert_eq!(admission.report.time_regressions, 0);
+        assert!(!admission.report.is_clean());
     }
 }

@@ -1,7 +1,23 @@
 //! The user header of every per-event stream (events, labels, kept, suppressed, keep-bitmap).
 
-use evgate_core::SensorSize;
+use evgate_core::{SensorSize, MAX_EVENT_TIME_US};
 use iceoryx2::prelude::ZeroCopySend;
+
+/// A batch whose header does not describe its payload; readers skip it (its events then show
+/// as lost at the next good batch).
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum BatchError {
+    #[error("batch {sequence}: header field event-count = {announced} but the payload holds {actual} items")]
+    EventCount {
+        sequence: u64,
+        announced: u64,
+        actual: usize,
+    },
+    #[error("batch {sequence}: header fields first-event-index = {first} + event-count = {count} overflow u64")]
+    IndexOverflow { sequence: u64, first: u64, count: u64 },
+    #[error("batch {sequence}: header span t-begin-us = {begin} .. t-end-us = {end} is reversed or outside ±{MAX_EVENT_TIME_US}")]
+    Span { sequence: u64, begin: i64, end: i64 },
+}
 
 /// Bits of [`BatchHeader::flags`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -69,9 +85,42 @@ impl BatchHeader {
         self.flags & BatchFlags::STREAM_RESTARTED != 0
     }
 
-    /// Index one past the last event of this batch in the stream.
+    /// Index one past the last event of this batch in the stream (saturating; a validated
+    /// header never saturates).
     pub const fn end_event_index(&self) -> u64 {
-        self.first_event_index + self.event_count
+        self.first_event_index.saturating_add(self.event_count)
+    }
+
+    /// Checks that the header describes a payload of `payload_len` events (or labels: one per
+    /// event; a keep bitmap is shorter). Validate a copy, never
+    /// the header in shared memory: its publisher can still write it.
+    pub fn validate(&self, payload_len: usize) -> Result<(), BatchError> {
+        let sequence = self.sequence;
+        if self.event_count != payload_len as u64 {
+            return Err(BatchError::EventCount {
+                sequence,
+                announced: self.event_count,
+                actual: payload_len,
+            });
+        }
+        if self.first_event_index.checked_add(self.event_count).is_none() {
+            return Err(BatchError::IndexOverflow {
+                sequence,
+                first: self.first_event_index,
+                count: self.event_count,
+            });
+        }
+        let in_range = |t: i64| t.unsigned_abs() <= MAX_EVENT_TIME_US.unsigned_abs();
+        if !(in_range(self.t_begin_us) && in_range(self.t_end_us))
+            || self.t_begin_us > self.t_end_us
+        {
+            return Err(BatchError::Span {
+                sequence,
+                begin: self.t_begin_us,
+                end: self.t_end_us,
+            });
+        }
+        Ok(())
     }
 }
 
@@ -100,6 +149,41 @@ mod tests {
         assert_eq!(back.end_event_index(), 120);
         assert!(back.is_end_of_stream());
         assert!(!back.has_gap());
+    }
+
+    /// Issue 15: the count, the index sum and the span were trusted unchecked.
+    #[test]
+    fn headers_that_lie_about_their_payload_are_refused() {
+        let good = BatchHeader {
+            sequence: 4,
+            first_event_index: 10,
+            event_count: 3,
+            t_begin_us: 0,
+            t_end_us: 1_000,
+            ..Default::default()
+        };
+        good.validate(3).unwrap();
+        assert!(matches!(
+            good.validate(2),
+            Err(BatchError::EventCount { announced: 3, actual: 2, .. })
+        ));
+        let overflowing = BatchHeader {
+            first_event_index: u64::MAX - 1,
+            ..good
+        };
+        assert!(matches!(
+            overflowing.validate(3),
+            Err(BatchError::IndexOverflow { .. })
+        ));
+        assert_eq!(overflowing.end_event_index(), u64::MAX);
+        for (begin, end) in [(5, 4), (i64::MIN, 0), (0, i64::MAX)] {
+            let span = BatchHeader {
+                t_begin_us: begin,
+                t_end_us: end,
+                ..good
+            };
+            assert!(matches!(span.validate(3), Err(BatchError::Span { .. })));
+        }
     }
 
     #[test]

@@ -1,21 +1,31 @@
 //! The user header of the forecast stream and the layout of its mask words.
 
+use evgate_core::MAX_EVENT_TIME_US;
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Most horizons one forecast carries.
 pub const MAX_HORIZONS: usize = 8;
+
+/// The longest horizon a forecast may carry, microseconds (a minute; the network's is 100 ms).
+pub const MAX_HORIZON_US: i64 = 60_000_000;
 
 /// A forecast that does not describe its payload.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 pub enum ForecastError {
     #[error("forecast header field horizon-count = {value} is out of range: accepted 1..={MAX_HORIZONS}")]
     HorizonCount { value: u32 },
-    #[error("forecast header field horizons-us[{index}] = {value} must be >= 0 and not below horizons-us[{previous}]")]
+    #[error("forecast header field horizons-us[{index}] = {value} is out of range: accepted 0..={MAX_HORIZON_US}")]
+    HorizonRange { index: usize, value: i64 },
+    #[error("forecast header field horizons-us[{index}] = {value} must be above horizons-us[{previous}]")]
     HorizonOrder {
         index: usize,
         previous: usize,
         value: i64,
     },
+    #[error("forecast header field {field} = {value} is out of range: accepted -{MAX_EVENT_TIME_US}..={MAX_EVENT_TIME_US}")]
+    Time { field: &'static str, value: i64 },
+    #[error("forecast header field source-stream-id = 0: a forecast names the stream it was computed from")]
+    NoSourceStream,
     #[error("forecast header field words-per-mask = {value} does not match a {width}x{height} mask (expected {expected})")]
     WordsPerMask {
         value: u32,
@@ -51,8 +61,8 @@ pub struct ForecastHeader {
     pub reference_time_us: i64,
     /// Start of the input window, microseconds.
     pub window_start_us: i64,
-    /// Horizons Δt after `reference_time_us`, microseconds, non-decreasing; only the first
-    /// `horizon_count` are meaningful.
+    /// Horizons Δt after `reference_time_us`, microseconds, strictly increasing, in
+    /// `0..=MAX_HORIZON_US`; only the first `horizon_count` are meaningful.
     pub horizons_us: [i64; MAX_HORIZONS],
     /// Time the model took for this forecast, microseconds.
     pub model_runtime_us: u64,
@@ -90,6 +100,8 @@ impl ForecastHeader {
 
     /// Checks that the header is self-consistent, that `words_per_mask` is the word count of a
     /// `BitMask` of its size (`expected_words_per_mask`) and that the payload has that many words.
+    ///
+    /// Validate a copy, never the header in shared memory: its publisher can still write it.
     pub fn validate(
         &self,
         expected_words_per_mask: usize,
@@ -100,16 +112,29 @@ impl ForecastHeader {
                 value: self.horizon_count,
             });
         }
+        if self.source_stream_id == 0 {
+            return Err(ForecastError::NoSourceStream);
+        }
+        for (field, value) in [
+            ("reference-time-us", self.reference_time_us),
+            ("window-start-us", self.window_start_us),
+        ] {
+            if value.unsigned_abs() > MAX_EVENT_TIME_US.unsigned_abs() {
+                return Err(ForecastError::Time { field, value });
+            }
+        }
         let horizons = self.horizons();
-        if horizons[0] < 0 {
-            return Err(ForecastError::HorizonOrder {
-                index: 0,
-                previous: 0,
-                value: horizons[0],
+        if let Some(index) = horizons
+            .iter()
+            .position(|horizon| !(0..=MAX_HORIZON_US).contains(horizon))
+        {
+            return Err(ForecastError::HorizonRange {
+                index,
+                value: horizons[index],
             });
         }
         for index in 1..horizons.len() {
-            if horizons[index] < horizons[index - 1] {
+            if horizons[index] <= horizons[index - 1] {
                 return Err(ForecastError::HorizonOrder {
                     index,
                     previous: index - 1,
@@ -149,6 +174,7 @@ mod tests {
 
     fn header(horizons: &[i64], words_per_mask: u32) -> ForecastHeader {
         let mut header = ForecastHeader {
+            source_stream_id: 9,
             horizon_count: horizons.len() as u32,
             words_per_mask,
             width: 8,
@@ -187,5 +213,38 @@ mod tests {
             header(&[10], 1).validate(1, 3),
             Err(ForecastError::PayloadLength { expected: 2, .. })
         ));
+    }
+
+    /// Issue 15: equal horizons passed here but failed the gate's view, so every forecast was
+    /// dropped silently; extreme times and stream id 0 were accepted.
+    #[test]
+    fn rejects_what_the_gate_could_not_use() {
+        assert!(matches!(
+            header(&[10, 10], 1).validate(1, 3),
+            Err(ForecastError::HorizonOrder { index: 1, .. })
+        ));
+        assert!(matches!(
+            header(&[-1], 1).validate(1, 2),
+            Err(ForecastError::HorizonRange { index: 0, .. })
+        ));
+        assert!(matches!(
+            header(&[MAX_HORIZON_US + 1], 1).validate(1, 2),
+            Err(ForecastError::HorizonRange { index: 0, .. })
+        ));
+        let mut extreme = header(&[10], 1);
+        extreme.reference_time_us = i64::MIN;
+        assert_eq!(
+            extreme.validate(1, 2),
+            Err(ForecastError::Time {
+                field: "reference-time-us",
+                value: i64::MIN
+            })
+        );
+        let mut anonymous = header(&[10], 1);
+        anonymous.source_stream_id = 0;
+        assert_eq!(
+            anonymous.validate(1, 2),
+            Err(ForecastError::NoSourceStream)
+        );
     }
 }

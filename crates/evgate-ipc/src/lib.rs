@@ -25,7 +25,7 @@ pub mod slice_writer;
 pub mod stale_service;
 pub mod stats;
 
-pub use batch::{BatchFlags, BatchHeader};
+pub use batch::{BatchError, BatchFlags, BatchHeader};
 pub use forecast::{ForecastError, ForecastHeader, MAX_HORIZONS};
 pub use logging::init_service_logging;
 pub use names::{NameError, PipelineNames, Stream};

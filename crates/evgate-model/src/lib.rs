@@ -12,6 +12,7 @@ pub mod options;
 pub mod output;
 pub mod runtime;
 pub mod state;
+pub mod trusted_path;
 
 pub use library::{locate_onnxruntime, LibraryError};
 pub use metadata::{AtcVariant, MetadataError, ModelMetadata, ModelSize};

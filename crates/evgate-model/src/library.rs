@@ -1,11 +1,14 @@
 //! Finding the ONNX Runtime shared library that `ort` loads at run time (`load-dynamic`).
 //!
-//! Order: `ORT_DYLIB_PATH` when set, else `.ort/libonnxruntime.so` in the current directory or
-//! any of its ancestors, else the same below the executable's directory and its ancestors (so a
-//! binary under `target/release` finds the workspace's `.ort/`).
+//! Order: `ORT_DYLIB_PATH` when set (the user's explicit choice), else `.ort/libonnxruntime.so`
+//! in the executable's directory or one of its ancestors (so a binary under `target/release`
+//! finds the workspace's `.ort/`). The working directory is never searched, and a found library
+//! is loaded only where no other user could have put it ([`crate::trusted_path`]).
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
+
+use crate::trusted_path::{self, Search, UntrustedPath};
 
 /// Environment variable that names the library file explicitly.
 pub const LIBRARY_PATH_VARIABLE: &str = "ORT_DYLIB_PATH";
@@ -29,21 +32,21 @@ pub enum LibraryError {
         looked_at.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
     )]
     NotFound { looked_at: Vec<PathBuf> },
+    #[error("{source}; or set {LIBRARY_PATH_VARIABLE}")]
+    Untrusted {
+        #[source]
+        source: UntrustedPath,
+    },
 }
 
-/// Finds the library from the process environment, current directory and executable path.
+/// Finds the library from the process environment and the executable's path.
 pub fn locate_onnxruntime() -> Result<PathBuf, LibraryError> {
-    let mut start_directories = Vec::new();
-    if let Ok(current) = std::env::current_dir() {
-        start_directories.push(current);
-    }
-    if let Some(executable_directory) = std::env::current_exe()
-        .ok()
-        .and_then(|exe| exe.parent().map(Path::to_path_buf))
-    {
-        start_directories.push(executable_directory);
-    }
-    locate_onnxruntime_from(std::env::var_os(LIBRARY_PATH_VARIABLE), &start_directories)
+    let starts: Vec<PathBuf> = trusted_path::executable_directory().into_iter().collect();
+    locate_onnxruntime_from(
+        std::env::var_os(LIBRARY_PATH_VARIABLE),
+        &starts,
+        trusted_path::current_user(),
+    )
 }
 
 /// The search itself, with its inputs explicit so that it can be tested without touching the
@@ -51,6 +54,7 @@ pub fn locate_onnxruntime() -> Result<PathBuf, LibraryError> {
 pub fn locate_onnxruntime_from(
     override_path: Option<OsString>,
     start_directories: &[PathBuf],
+    user: u32,
 ) -> Result<PathBuf, LibraryError> {
     if let Some(path) = override_path.filter(|p| !p.is_empty()).map(PathBuf::from) {
         return if path.is_file() {
@@ -59,25 +63,18 @@ pub fn locate_onnxruntime_from(
             Err(LibraryError::OverrideMissing { path })
         };
     }
-    let mut looked_at: Vec<PathBuf> = Vec::new();
-    for start in start_directories {
-        for directory in start.ancestors() {
-            let candidate = directory.join(BUNDLED_LIBRARY);
-            if looked_at.contains(&candidate) {
-                continue;
-            }
-            if candidate.is_file() {
-                return Ok(candidate);
-            }
-            looked_at.push(candidate);
-        }
+    match trusted_path::find_in_ancestors(Path::new(BUNDLED_LIBRARY), start_directories, user)
+        .map_err(|source| LibraryError::Untrusted { source })?
+    {
+        Search::Found(path) => Ok(path),
+        Search::Missing(looked_at) => Err(LibraryError::NotFound { looked_at }),
     }
-    Err(LibraryError::NotFound { looked_at })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::trusted_path::current_user;
 
     #[test]
     fn finds_the_bundled_library_in_an_ancestor() {
@@ -86,7 +83,7 @@ mod tests {
         std::fs::write(root.path().join(BUNDLED_LIBRARY), b"").unwrap();
         let nested = root.path().join("target/release");
         std::fs::create_dir_all(&nested).unwrap();
-        let found = locate_onnxruntime_from(None, std::slice::from_ref(&nested)).unwrap();
+        let found = locate_onnxruntime_from(None, std::slice::from_ref(&nested), current_user()).unwrap();
         assert_eq!(found, root.path().join(BUNDLED_LIBRARY));
     }
 
@@ -98,8 +95,12 @@ mod tests {
         let custom = root.path().join("custom.so");
         std::fs::write(&custom, b"").unwrap();
         let found =
-            locate_onnxruntime_from(Some(custom.clone().into()), &[root.path().to_path_buf()])
-                .unwrap();
+            locate_onnxruntime_from(
+                Some(custom.clone().into()),
+                &[root.path().to_path_buf()],
+                current_user(),
+            )
+            .unwrap();
         assert_eq!(found, custom);
     }
 
@@ -107,7 +108,7 @@ mod tests {
     fn missing_override_is_an_error_naming_it() {
         let root = tempfile::tempdir().unwrap();
         let missing = root.path().join("nowhere.so");
-        let error = locate_onnxruntime_from(Some(missing.clone().into()), &[]).unwrap_err();
+        let error = locate_onnxruntime_from(Some(missing.clone().into()), &[], current_user()).unwrap_err();
         let message = error.to_string();
         assert!(
             message.contains(&missing.display().to_string()),
@@ -121,7 +122,8 @@ mod tests {
         let root = tempfile::tempdir().unwrap();
         let nested = root.path().join("a/b");
         std::fs::create_dir_all(&nested).unwrap();
-        let error = locate_onnxruntime_from(None, std::slice::from_ref(&nested)).unwrap_err();
+        let error =
+            locate_onnxruntime_from(None, std::slice::from_ref(&nested), current_user()).unwrap_err();
         let message = error.to_string();
         for directory in [nested.as_path(), &root.path().join("a"), root.path()] {
             let candidate = directory.join(BUNDLED_LIBRARY).display().to_string();
@@ -132,6 +134,26 @@ mod tests {
         }
         assert!(
             message.contains("bash scripts/fetch-onnxruntime.sh"),
+            "{message}"
+        );
+    }
+
+    /// The attack of issue 15: another user's `.ort/` in an ancestor of the search start.
+    #[test]
+    fn a_library_others_could_plant_is_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        let root = tempfile::tempdir().unwrap();
+        let shared = root.path().join("shared");
+        std::fs::create_dir_all(shared.join(".ort")).unwrap();
+        std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o777)).unwrap();
+        std::fs::write(shared.join(BUNDLED_LIBRARY), b"").unwrap();
+        let work = shared.join("work/target/release");
+        std::fs::create_dir_all(&work).unwrap();
+        let message = locate_onnxruntime_from(None, &[work], current_user())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("refusing to load") && message.contains(LIBRARY_PATH_VARIABLE),
             "{message}"
         );
     }

@@ -109,7 +109,7 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<()> {
     } else {
         let report = &summary.input_report;
         println!(
-            "{} ({}) -> {} ({}): {} events, sensor {}x{}, {:.3} s ({:.0} events/s); input repairs: {} dropped outside the sensor, {} time regressions, {} skipped words",
+            "{} ({}) -> {} ({}): {} events, sensor {}x{}, {:.3} s ({:.0} events/s); input repairs: {} dropped outside the sensor, {} dropped outside the time range, {} time regressions, {} skipped words",
             summary.input.display(),
             summary.input_format,
             summary.output.display(),
@@ -120,6 +120,7 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<()> {
             summary.seconds,
             summary.events_per_s,
             report.dropped_out_of_sensor,
+            report.dropped_out_of_time_range,
             report.time_regressions,
             report.skipped_words
         );

@@ -30,11 +30,7 @@ pub struct InfoArgs {
     pub evt3_time_low: Evt3TimeLow,
 }
 
-pub fn parse_sensor_size(text: &str) -> Result<SensorSize, String> {
-    evgate_io::header::parse_geometry(text).ok_or_else(|| {
-        format!("`{text}` is not a sensor size WxH with sides in 1..=65535 (e.g. 640x480)")
-    })
-}
+pub use evgate_io::header::parse_sensor_flag as parse_sensor_size;
 
 /// Everything `info` reports; the JSON keys are these fields in kebab-case.
 #[derive(Serialize)]
@@ -196,6 +192,13 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         report.dropped_out_of_sensor,
         report
             .first_out_of_sensor_offset
+            .map_or(String::new(), |o| format!(" (first at byte {o})"))
+    );
+    println!(
+        "dropped         {} outside ±2^60 us{}",
+        report.dropped_out_of_time_range,
+        report
+            .first_out_of_time_range_offset
             .map_or(String::new(), |o| format!(" (first at byte {o})"))
     );
     println!(

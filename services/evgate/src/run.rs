@@ -49,6 +49,10 @@ pub struct RunArgs {
     /// scored against its labels); without it, the built-in simulated camera.
     #[arg(long)]
     input: Option<PathBuf>,
+    /// Sensor size of --input as WIDTHxHEIGHT: required for files that give none (text), and
+    /// overrides the file's otherwise.
+    #[arg(long, value_parser = crate::info::parse_sensor_size)]
+    sensor: Option<evgate_core::SensorSize>,
     /// Scene of the simulated camera: boxes, floor, wall, table, fast, tabletop or driving.
     #[arg(long, default_value = "boxes")]
     preset: String,
@@ -61,8 +65,8 @@ pub struct RunArgs {
     duration: Option<f64>,
     /// Exported network the inference runs; default: the shipped export for the source's
     /// sensor size, models/evgate-S.onnx (sensors padding to 352×272, such as 346×260) or
-    /// models/evgate-S-640x480.onnx (640×480), looked for under the current directory and the
-    /// executable's.
+    /// models/evgate-S-640x480.onnx (640×480), looked for in the executable's directory and
+    /// its ancestors, and used only where no other user could have put it.
     #[arg(long)]
     model: Option<PathBuf>,
     /// Execution provider of the inference service: cpu, cuda (falls back to cpu with a
@@ -150,9 +154,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             model.display()
         ),
         (None, false) => {
-            let sensor = default_model::source_sensor(args.input.as_deref(), &args.preset)?;
-            let mut search_from: Vec<PathBuf> = std::env::current_dir().into_iter().collect();
-            search_from.extend(binary_directory());
+            let sensor = default_model::source_sensor(args.input.as_deref(), args.sensor, &args.preset)?;
+            let search_from: Vec<PathBuf> = binary_directory().into_iter().collect();
             Some(default_model::shipped_model_for(sensor, &search_from)?)
         }
     };
@@ -214,6 +217,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let source = match &args.input {
         Some(path) => {
             ingest_args.extend(["--input".to_owned(), path.display().to_string()]);
+            if let Some(sensor) = args.sensor {
+                ingest_args.extend(["--sensor".to_owned(), sensor.to_string()]);
+            }
             path.display().to_string()
         }
         None => {

@@ -69,7 +69,9 @@ impl Accounting {
             );
         }
         self.expected_index = Some(header.end_event_index());
-        self.stats.input_events = header.end_event_index() - self.stats.joined_at_event_index;
+        self.stats.input_events = header
+            .end_event_index()
+            .saturating_sub(self.stats.joined_at_event_index);
         self.stats.input_batches += 1;
         if header.is_end_of_stream() {
             self.stats.end_of_stream = 1;

@@ -24,19 +24,20 @@ pub struct StoredForecast {
 }
 
 impl StoredForecast {
-    /// Validates a received forecast and copies it.
-    pub fn copy_from(header: &ForecastHeader, payload: &[u64]) -> Result<Self, RejectedForecast> {
-        let sensor = SensorSize::new(header.width, header.height);
+    /// Copies a received forecast and validates the copy (so a publisher writing the shared
+    /// memory afterwards cannot change what was checked).
+    pub fn copy_from(header: ForecastHeader, payload: &[u64]) -> Result<Self, RejectedForecast> {
+        let stored = Self {
+            header,
+            words: payload.to_vec(),
+        };
+        let sensor = stored.sensor();
         header
-            .validate(words_for(sensor), payload.len())
+            .validate(words_for(sensor), stored.words.len())
             .map_err(|source| RejectedForecast::Header {
                 sequence: header.sequence,
                 source,
             })?;
-        let stored = Self {
-            header: *header,
-            words: payload.to_vec(),
-        };
         stored.view().map_err(|source| RejectedForecast::Masks {
             sequence: header.sequence,
             source,

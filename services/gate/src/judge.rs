@@ -158,6 +158,7 @@ mod tests {
             words.extend_from_slice(mask.as_words());
         }
         let mut header = ForecastHeader {
+            source_stream_id: 1,
             reference_time_us,
             horizon_count: 2,
             words_per_mask: 1,
@@ -166,7 +167,7 @@ mod tests {
             ..Default::default()
         };
         header.horizons_us[..2].copy_from_slice(&[10_000, 20_000]);
-        StoredForecast::copy_from(&header, &words).unwrap()
+        StoredForecast::copy_from(header, &words).unwrap()
     }
 
     fn selected(judge: &Judge, events: &[Event], passed: bool) -> Vec<Event> {

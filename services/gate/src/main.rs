@@ -265,10 +265,8 @@ fn forecast_for<'a>(
     header: &BatchHeader,
 ) -> Option<&'a StoredForecast> {
     forecast.filter(|forecast| {
-        // 0 = an inference that does not track stream ids; accepted for any stream.
-        let same_stream = forecast.header.source_stream_id == 0
-            || forecast.header.source_stream_id == header.stream_id;
-        same_stream && forecast.sensor() == header.sensor()
+        forecast.header.source_stream_id == header.stream_id
+            && forecast.sensor() == header.sensor()
     })
 }
 
@@ -280,7 +278,9 @@ impl Gate {
     ) -> anyhow::Result<()> {
         while let Some(sample) = forecasts.receive()? {
             self.forecasts_received += 1;
-            match StoredForecast::copy_from(sample.user_header(), sample.payload()) {
+            // The header is copied out before it is checked: its publisher may still write the
+            // shared memory.
+            match StoredForecast::copy_from(*sample.user_header(), sample.payload()) {
                 Ok(forecast) => {
                     self.latest_model_runtime_us = forecast.header.model_runtime_us as i64;
                     self.forecast = Some(forecast);
@@ -304,7 +304,13 @@ impl Gate {
         while let Some(sample) = events.receive()? {
             // A forecast that arrived meanwhile judges this batch already.
             self.take_forecasts(forecasts)?;
+            // Copied before it is checked: the publisher may still write the shared memory.
             let header = *sample.user_header();
+            if let Err(error) = header.validate(sample.payload().len()) {
+                // Its events show as lost at the next good batch.
+                warn!(%error, "batch ignored");
+                continue;
+            }
             reached_end |= self.gate_batch(&header, sample.payload())?;
             // Under a sustained flood this loop does not return to the waitset, whose interval
             // would then never fire.

@@ -14,7 +14,8 @@ pub enum HorizonError {
     )]
     OutOfRange { index: usize, value: f32, max: f32 },
     #[error(
-        "--horizons-ms must be strictly ascending: value #{index} = {value} ms follows {previous} ms"
+        "--horizons-ms must be strictly ascending in whole microseconds (forecasts carry µs): \
+         value #{index} = {value} ms follows {previous} ms"
     )]
     NotAscending {
         index: usize,
@@ -45,7 +46,7 @@ pub fn resolve_horizons(requested: &[f32], max_horizon_ms: f32) -> Result<Vec<f3
                 max: max_horizon_ms,
             });
         }
-        if index > 0 && value <= requested[index - 1] {
+        if index > 0 && horizon_us(value) <= horizon_us(requested[index - 1]) {
             return Err(HorizonError::NotAscending {
                 index,
                 value,
@@ -54,6 +55,11 @@ pub fn resolve_horizons(requested: &[f32], max_horizon_ms: f32) -> Result<Vec<f3
         }
     }
     Ok(requested.to_vec())
+}
+
+/// A horizon as a forecast header carries it: whole microseconds.
+pub fn horizon_us(ms: f32) -> i64 {
+    (f64::from(ms) * 1000.0).round() as i64
 }
 
 #[cfg(test)]
@@ -77,6 +83,10 @@ mod tests {
         assert!(matches!(
             resolve_horizons(&[10.0, 150.0], 100.0),
             Err(HorizonError::OutOfRange { index: 1, .. })
+        ));
+        assert!(matches!(
+            resolve_horizons(&[10.0, 10.0004], 100.0),
+            Err(HorizonError::NotAscending { index: 1, .. })
         ));
         assert!(matches!(
             resolve_horizons(&[50.0, 50.0], 100.0),

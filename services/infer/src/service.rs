@@ -17,7 +17,7 @@ use evgate_model::{ModelRuntime, RuntimeOptions};
 use tracing::{error, info, warn};
 
 use crate::args::InferArgs;
-use crate::horizons::resolve_horizons;
+use crate::horizons::{horizon_us, resolve_horizons};
 use crate::latest_slot::LatestSlot;
 use crate::stats::{InferCounters, InferReport, RunDescription};
 use crate::windowing::{ClosedWindow, WindowAssembler, WindowMode};
@@ -104,10 +104,7 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
 
     let mut state = LoopState {
         description,
-        horizons_us: horizons_ms
-            .iter()
-            .map(|&ms| (f64::from(ms) * 1000.0).round() as i64)
-            .collect(),
+        horizons_us: horizons_ms.iter().map(|&ms| horizon_us(ms)).collect(),
         counters: InferCounters::default(),
         current_stream: None,
         next_event_index: 0,
@@ -186,7 +183,13 @@ impl LoopState {
     ) -> anyhow::Result<()> {
         events.clear_wakeups();
         while let Some(sample) = events.receive()? {
+            // Copied before it is checked: the publisher may still write the shared memory.
             let header = *sample.user_header();
+            if let Err(error) = header.validate(sample.payload().len()) {
+                self.counters.batches_rejected += 1;
+                warn!(%error, "batch ignored");
+                continue;
+            }
             self.note_batch(&header, assembler);
             assembler.push(
                 sample.payload(),

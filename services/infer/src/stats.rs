@@ -12,6 +12,8 @@ use crate::worker::ForecastReady;
 #[derive(Debug, Default)]
 pub struct InferCounters {
     pub batches_received: u64,
+    /// Batches whose header did not describe their payload, skipped.
+    pub batches_rejected: u64,
     pub events_received: u64,
     pub gaps_detected: u64,
     pub streams_started: u64,
@@ -91,6 +93,7 @@ pub struct InferReport {
     pub windowing: String,
     pub elapsed_s: f64,
     pub batches_received: u64,
+    pub batches_rejected: u64,
     pub events_received: u64,
     pub gaps_detected: u64,
     pub streams_started: u64,
@@ -133,6 +136,7 @@ impl InferReport {
             windowing: description.windowing.clone(),
             elapsed_s,
             batches_received: counters.batches_received,
+            batches_rejected: counters.batches_rejected,
             events_received: counters.events_received,
             gaps_detected: counters.gaps_detected,
             streams_started: counters.streams_started,

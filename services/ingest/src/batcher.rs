@@ -78,16 +78,19 @@ impl Batcher {
             BatchSize::Count { events } => {
                 let count = events.min(available);
                 let last_t = self.pending_events[self.consumed + count - 1].t;
-                (count, first_t, last_t + 1)
+                (count, first_t, last_t.saturating_add(1))
             }
             BatchSize::Duration { micros } => {
                 let grid_begin = *self.next_begin_us.get_or_insert(first_t);
                 // Skip empty spans so the batch starts at the span holding the next event.
                 let skipped = (first_t - grid_begin).div_euclid(micros);
                 let t_begin = grid_begin + skipped * micros;
-                let t_end = t_begin + micros;
+                // Saturating: a span reaching past i64::MAX still takes its events, so the loop
+                // always makes progress.
+                let t_end = t_begin.saturating_add(micros);
                 self.next_begin_us = Some(t_end);
-                let count = self.pending_events[self.consumed..].partition_point(|e| e.t < t_end);
+                let count = self.pending_events[self.consumed..]
+                    .partition_point(|e| e.t < t_end || t_end == i64::MAX);
                 (count, t_begin, t_end)
             }
         };
@@ -118,7 +121,7 @@ impl Batcher {
                 let first_t = self.pending_events[self.consumed].t;
                 let grid_begin = self.next_begin_us.unwrap_or(first_t);
                 let skipped = (first_t - grid_begin).div_euclid(micros);
-                let t_end = grid_begin + (skipped + 1) * micros;
+                let t_end = (grid_begin + skipped * micros).saturating_add(micros);
                 self.watermark_us >= t_end
             }
         }
@@ -217,5 +220,20 @@ mod tests {
         assert_eq!(batches.len(), 3);
         assert!(batches[2].3);
         assert_eq!((batches[0].1, batches[0].2), (1, 3));
+    }
+
+    /// Issue 15: spans ending past i64::MAX wrapped, so no event fitted and `evgate-ingest`
+    /// looped forever on empty batches.
+    #[test]
+    fn spans_at_the_end_of_the_time_range_still_take_their_events() {
+        let near_max = i64::MAX - 5;
+        let batches = collect(
+            BatchSize::Duration { micros: 1_000 },
+            vec![vec![near_max - 2_000, near_max, i64::MAX]],
+        );
+        let times: Vec<i64> = batches.iter().flat_map(|b| b.0.clone()).collect();
+        assert_eq!(times, vec![near_max - 2_000, near_max, i64::MAX]);
+        let batches = collect(BatchSize::Count { events: 1 }, vec![vec![i64::MAX]]);
+        assert_eq!(batches[0].2, i64::MAX);
     }
 }

@@ -41,6 +41,10 @@ struct Args {
     /// built-in simulated camera is used.
     #[arg(long)]
     input: Option<PathBuf>,
+    /// Sensor size of --input as WIDTHxHEIGHT: required for files that give none (text), and
+    /// overrides the file's otherwise.
+    #[arg(long, value_parser = evgate_io::header::parse_sensor_flag)]
+    sensor: Option<evgate_core::SensorSize>,
     /// Scene of the simulated camera: boxes, floor, wall, table, fast, tabletop or driving.
     #[arg(long, default_value = "boxes")]
     preset: Preset,
@@ -116,6 +120,9 @@ struct IngestSummary {
     events_per_s: f64,
     /// `end-of-stream` or `signal`.
     ended_by: &'static str,
+    /// What the file's decoder dropped, skipped or found out of order (last pass; null for the
+    /// simulated camera and labelled sequences).
+    input_report: Option<evgate_io::DecodeReport>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -163,7 +170,7 @@ fn open_source(args: &Args) -> anyhow::Result<(Box<dyn EventSource>, String)> {
             ))
         }
         Some(path) => {
-            let source = Recording::open(path)?;
+            let source = Recording::open(path, args.sensor)?;
             Ok((Box::new(source), path.display().to_string()))
         }
         None => {
@@ -181,7 +188,8 @@ fn open_source(args: &Args) -> anyhow::Result<(Box<dyn EventSource>, String)> {
     }
 }
 
-/// An id that differs between runs, so readers notice a restarted ingest.
+/// An id that differs between runs, so readers notice a restarted ingest; never 0, which
+/// forecasts may not name.
 fn new_stream_id() -> u64 {
     let mixed =
         clock::monotonic_ns() ^ (u64::from(std::process::id()) << 40) ^ clock::wall_us() as u64;
@@ -189,7 +197,7 @@ fn new_stream_id() -> u64 {
     let mut z = mixed.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+    (z ^ (z >> 31)).max(1)
 }
 
 fn run(args: &Args) -> anyhow::Result<IngestSummary> {
@@ -308,7 +316,7 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
         publish_end_of_stream(&events, labels.as_ref(), stream_id, sensor, &mut totals)?;
     }
     progress.finish_and_clear();
-    let summary = summary_of(
+    let mut summary = summary_of(
         &description,
         sensor,
         stream_id,
@@ -317,6 +325,16 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
         ended_by,
         labels.is_some(),
     );
+    summary.input_report = source.decode_report();
+    if let Some(report) = summary.input_report.as_ref().filter(|report| !report.is_clean()) {
+        warn!(
+            dropped_out_of_sensor = report.dropped_out_of_sensor,
+            dropped_out_of_time_range = report.dropped_out_of_time_range,
+            time_regressions = report.time_regressions,
+            skipped_words = report.skipped_words,
+            "the input needed repairs (see input-report in the summary)"
+        );
+    }
     if ended_by == "end-of-stream" {
         linger_until_subscribers_leave(&node, &events, Duration::from_millis(args.linger_ms));
     }
@@ -457,5 +475,6 @@ fn summary_of(
             0.0
         },
         ended_by,
+        input_report: None,
     }
 }

@@ -14,6 +14,11 @@ pub enum SourceError {
     Sequence { path: PathBuf, reason: String },
     #[error("input {path} has no events")]
     Empty { path: PathBuf },
+    #[error(
+        "input {path} does not give its sensor size (text event files carry none); pass \
+         --sensor WIDTHxHEIGHT"
+    )]
+    UnknownSensor { path: PathBuf },
     #[error(transparent)]
     Decode(#[from] evgate_io::DecodeError),
 }
@@ -40,6 +45,10 @@ pub trait EventSource {
     /// Starts pass number `pass` (1 for the first repetition) over from the first event, shifted
     /// by `pass` times the source's span so stream time keeps increasing across loops.
     fn restart(&mut self, pass: i64) -> Result<(), SourceError>;
+    /// What the decoder of a file dropped, skipped or found out of order in the current pass.
+    fn decode_report(&self) -> Option<evgate_io::DecodeReport> {
+        None
+    }
 }
 
 /// The built-in simulated camera, generating events incrementally for `duration_us`.
@@ -204,6 +213,7 @@ impl EventSource for InMemory {
 /// An event file of any format evgate-io decodes, streamed chunk by chunk (no labels).
 pub struct Recording {
     path: PathBuf,
+    options: evgate_io::reader::OpenOptions,
     reader: Box<dyn EventReader>,
     chunk: Vec<Event>,
     offset_us: i64,
@@ -214,10 +224,23 @@ pub struct Recording {
 }
 
 impl Recording {
-    pub fn open(path: &Path) -> Result<Self, SourceError> {
+    /// Opens `path`; `sensor` is required where the file gives no size and overrides it
+    /// otherwise.
+    pub fn open(path: &Path, sensor: Option<SensorSize>) -> Result<Self, SourceError> {
+        let options = evgate_io::reader::OpenOptions {
+            sensor_size: sensor,
+            ..Default::default()
+        };
+        let reader = evgate_io::open_with(path, &options)?;
+        if reader.sensor_size() == evgate_io::reader::UNBOUNDED_SENSOR {
+            return Err(SourceError::UnknownSensor {
+                path: path.to_owned(),
+            });
+        }
         Ok(Self {
             path: path.to_owned(),
-            reader: evgate_io::open(path)?,
+            options,
+            reader,
             chunk: Vec::new(),
             offset_us: 0,
             first_t: None,
@@ -230,6 +253,10 @@ impl Recording {
 impl EventSource for Recording {
     fn sensor(&self) -> SensorSize {
         self.reader.sensor_size()
+    }
+
+    fn decode_report(&self) -> Option<evgate_io::DecodeReport> {
+        Some(self.reader.report().clone())
     }
 
     fn has_labels(&self) -> bool {
@@ -266,7 +293,7 @@ impl EventSource for Recording {
         let span = *self
             .span_us
             .get_or_insert(self.last_t - self.first_t.unwrap_or(self.last_t) + 1);
-        self.reader = evgate_io::open(&self.path)?;
+        self.reader = evgate_io::open_with(&self.path, &self.options)?;
         self.offset_us = pass * span;
         Ok(())
     }

@@ -8,6 +8,7 @@ use anyhow::{bail, Context};
 use evgate_core::SensorSize;
 use evgate_io::reader::UNBOUNDED_SENSOR;
 use evgate_io::LabelledSequence;
+use evgate_model::trusted_path::{self, Search};
 
 /// The shipped exports of one set of weights, by the padded input size each takes.
 const SHIPPED: [(&str, SensorSize); 2] = [
@@ -15,21 +16,26 @@ const SHIPPED: [(&str, SensorSize); 2] = [
     ("evgate-S-640x480.onnx", SensorSize::new(640, 480)),
 ];
 
-/// The source's sensor: the preset's for the simulated camera, else the file's.
-pub fn source_sensor(input: Option<&Path>, preset: &str) -> anyhow::Result<SensorSize> {
-    let sensor = match input {
-        None => preset.parse::<evgate_sim::Preset>()?.config().sensor,
-        Some(path) if LabelledSequence::is_labelled_sequence(path) => {
+/// The source's sensor: the preset's for the simulated camera, else `--sensor` or the file's.
+pub fn source_sensor(
+    input: Option<&Path>,
+    sensor_flag: Option<SensorSize>,
+    preset: &str,
+) -> anyhow::Result<SensorSize> {
+    let sensor = match (input, sensor_flag) {
+        (None, _) => preset.parse::<evgate_sim::Preset>()?.config().sensor,
+        (Some(_), Some(sensor)) => sensor,
+        (Some(path), None) if LabelledSequence::is_labelled_sequence(path) => {
             LabelledSequence::read_sensor_size(path)?
         }
-        Some(path) => evgate_io::open(path)
+        (Some(path), None) => evgate_io::open(path)
             .with_context(|| format!("cannot open --input {}", path.display()))?
             .sensor_size(),
     };
     if sensor == UNBOUNDED_SENSOR {
         bail!(
-            "--input {} does not give its sensor size, so no shipped model can be chosen; pass \
-             --model",
+            "--input {} does not give its sensor size (text event files carry none); pass \
+             --sensor WIDTHxHEIGHT",
             input.map_or(String::new(), |path| path.display().to_string())
         );
     }
@@ -37,37 +43,43 @@ pub fn source_sensor(input: Option<&Path>, preset: &str) -> anyhow::Result<Senso
 }
 
 /// The shipped model for `sensor`, looked for as `models/<file>` in each of `search_from` and
-/// their ancestors (the current directory, then the executable's, so that a build run from
-/// anywhere in the checkout finds the checkout's models).
+/// their ancestors (the executable's directory, so that a build anywhere in the checkout finds
+/// the checkout's models); like the runtime library, only where no other user could have put it.
 pub fn shipped_model_for(sensor: SensorSize, search_from: &[PathBuf]) -> anyhow::Result<PathBuf> {
     let padded = sensor.padded_to(16);
-    let Some((file, _)) = SHIPPED.iter().find(|(_, input)| *input == padded) else {
+    let Some((file, _)) = SHIPPED
+        .iter()
+        .find(|(_, input)| Some(*input) == padded)
+    else {
         let shipped: Vec<String> = SHIPPED
             .iter()
             .map(|(file, input)| format!("models/{file} ({input})"))
             .collect();
         bail!(
-            "no shipped model takes a {sensor} sensor (padded to {padded}); the shipped ones \
-             take {}. Export one for this size (models/training: python -m evgate_train.export \
-             --height H --width W) and pass --model",
+            "no shipped model takes a {sensor} sensor{}; the shipped ones take {}. Export one \
+             for this size (models/training: python -m evgate_train.export --height H --width \
+             W) and pass --model",
+            padded.map_or(String::new(), |padded| format!(" (padded to {padded})")),
             shipped.join(", ")
         );
     };
-    let mut looked_at = Vec::new();
-    for start in search_from {
-        for directory in start.ancestors() {
-            let candidate = directory.join("models").join(file);
-            if candidate.is_file() {
-                return Ok(candidate);
-            }
-            looked_at.push(candidate.display().to_string());
-        }
+    let relative = Path::new("models").join(file);
+    match trusted_path::find_in_ancestors(&relative, search_from, trusted_path::current_user())
+        .with_context(|| {
+            format!("the shipped model {} cannot be used; pass --model", relative.display())
+        })?
+    {
+        Search::Found(path) => Ok(path),
+        Search::Missing(looked_at) => bail!(
+            "the shipped model models/{file} for a {sensor} sensor is missing (looked at {}); \
+             pass --model",
+            looked_at
+                .iter()
+                .map(|path| path.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     }
-    bail!(
-        "the shipped model models/{file} for a {sensor} sensor is missing (looked at {}); pass \
-         --model",
-        looked_at.join(", ")
-    )
 }
 
 #[cfg(test)]
@@ -122,18 +134,28 @@ mod tests {
     #[test]
     fn the_source_sensor_comes_from_the_preset_or_the_file() {
         assert_eq!(
-            source_sensor(None, "boxes").unwrap(),
+            source_sensor(None, None, "boxes").unwrap(),
             SensorSize::new(346, 260)
         );
         assert_eq!(
-            source_sensor(None, "driving").unwrap(),
+            source_sensor(None, None, "driving").unwrap(),
             SensorSize::new(640, 480)
         );
-        assert!(source_sensor(None, "night").is_err());
+        assert!(source_sensor(None, None, "night").is_err());
         let recording = workspace().join("../../../shared/data/real/evt2_640x480.raw");
         assert_eq!(
-            source_sensor(Some(&recording), "boxes").unwrap(),
+            source_sensor(Some(&recording), None, "boxes").unwrap(),
             SensorSize::new(640, 480)
+        );
+        let text = tempfile::NamedTempFile::with_suffix(".csv").unwrap();
+        std::fs::write(text.path(), "1,2,3,1\n").unwrap();
+        let message = source_sensor(Some(text.path()), None, "boxes")
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("--sensor"), "{message}");
+        assert_eq!(
+            source_sensor(Some(text.path()), Some(SensorSize::new(346, 260)), "boxes").unwrap(),
+            SensorSize::new(346, 260)
         );
     }
 }
