@@ -3,7 +3,8 @@
 //! `CD_OFF` (0x0) / `CD_ON` (0x1): 6 low time bits at 22..28, x at 11..22, y at 0..11;
 //! `TIME_HIGH` (0x8): bits 6..34 of the time; `EXT_TRIGGER` (0xA), `OTHERS` (0xE) and
 //! `CONTINUED` (0xF) carry no CD events and are passed over; any other type is skipped and
-//! counted. A `TIME_HIGH` smaller than the previous one is a wrap of the 34-bit time.
+//! counted. `TIME_HIGH` steps, wraps of the 34-bit time and corrupt values follow
+//! [`crate::time_high`].
 
 use evgate_core::{Event, SensorSize};
 
@@ -12,13 +13,12 @@ use crate::records::{BadRecord, RecordFormat};
 use crate::report::Admission;
 use crate::source::ByteSource;
 use crate::stream_decoder::StreamDecoder;
-
-const TIME_HIGH_WRAP: i64 = 1 << 34;
+use crate::time_high::TimeHigh;
 
 /// The time base EVT 2.0 words carry from one to the next.
 pub struct Evt2Words {
-    time_high: i64,
-    wraps: i64,
+    /// Bits 6..34 of the time.
+    time_high: TimeHigh,
 }
 
 pub type Evt2Decoder = StreamDecoder<Evt2Words>;
@@ -30,8 +30,7 @@ impl Evt2Decoder {
             source,
             sensor_size,
             Evt2Words {
-                time_high: 0,
-                wraps: 0,
+                time_high: TimeHigh::new(28, 64),
             },
         )
     }
@@ -53,20 +52,14 @@ impl RecordFormat for Evt2Words {
         let word = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
         match word >> 28 {
             kind @ (0x0 | 0x1) => {
-                // Saturating: adversarial input can repeat wraps past the i64 range.
-                let t = self
-                    .wraps
-                    .saturating_add(self.time_high + ((word >> 22) & 0x3f) as i64);
+                let t = self.time_high.base_us() + ((word >> 22) & 0x3f) as i64;
                 let x = ((word >> 11) & 0x7ff) as u16;
                 let y = (word & 0x7ff) as u16;
                 admission.admit(out, Event::new(t, x, y, kind == 1), offset);
             }
             0x8 => {
-                let time_high = ((word & 0x0fff_ffff) as i64) << 6;
-                if time_high < self.time_high {
-                    self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
-                }
-                self.time_high = time_high;
+                self.time_high
+                    .update((word & 0x0fff_ffff) as i64, offset, &mut admission.report)
             }
             0xA | 0xE | 0xF => {}
             _ => admission.report.skip_word(offset),
@@ -100,22 +93,39 @@ mod tests {
     #[test]
     fn words_decode_to_events_with_time_high_and_wrap() {
         let (events, report) = decode(&[
-            0x8000_0002,
+            0x8fff_ffff,
             cd(true, 5, 10, 20),
             0xA000_0000,
             cd(false, 63, 639, 479),
-            0x8000_0001,
+            0x8000_0000,
             cd(true, 0, 1, 2),
         ]);
         assert_eq!(
             events,
             vec![
-                Event::new(133, 10, 20, true),
-                Event::new(191, 639, 479, false),
-                Event::new((1 << 34) + 64, 1, 2, true),
+                Event::new((1 << 34) - 59, 10, 20, true),
+                Event::new((1 << 34) - 1, 639, 479, false),
+                Event::new(1 << 34, 1, 2, true),
             ]
         );
         assert!(report.is_clean());
+    }
+
+    /// Issue 15: a `TIME_HIGH` one step back was read as a wrap, +2^34 µs.
+    #[test]
+    fn a_corrupt_time_high_is_ignored_and_counted() {
+        let (events, report) = decode(&[
+            0x8000_0002,
+            cd(true, 5, 10, 20),
+            0x8000_0001,
+            cd(true, 6, 1, 2),
+            0x8000_0003,
+            cd(true, 0, 1, 2),
+        ]);
+        let times: Vec<i64> = events.iter().map(|e| e.t).collect();
+        assert_eq!(times, vec![133, 134, 192]);
+        assert_eq!(report.implausible_time_jumps, 1);
+        assert_eq!(report.first_implausible_time_jump_offset, Some(8));
     }
 
     #[test]

@@ -3,8 +3,8 @@
 //! `ADDR_Y` (0x0): row; `ADDR_X` (0x2): one event at x with polarity bit 11; `VECT_BASE_X`
 //! (0x3): base column and polarity for the vectors that follow; `VECT_12` (0x4) / `VECT_8`
 //! (0x5): a bit mask of events at base, base+1, … after which the base advances by 12 / 8;
-//! `TIME_LOW` (0x6) / `TIME_HIGH` (0x8): bits 0..12 / 12..24 of the time. A `TIME_HIGH` smaller
-//! than the previous one is a wrap of the 24-bit time. `CONTINUED_4` (0x7), `EXT_TRIGGER`
+//! `TIME_LOW` (0x6) / `TIME_HIGH` (0x8): bits 0..12 / 12..24 of the time; `TIME_HIGH` steps,
+//! wraps of the 24-bit time and corrupt values follow [`crate::time_high`]. `CONTINUED_4` (0x7), `EXT_TRIGGER`
 //! (0xA), `OTHERS` (0xE) and `CONTINUED_12` (0xF) carry no CD events and are passed over; any
 //! other type is skipped and counted.
 //!
@@ -23,8 +23,8 @@ use crate::records::{BadRecord, RecordFormat};
 use crate::report::Admission;
 use crate::source::ByteSource;
 use crate::stream_decoder::StreamDecoder;
+use crate::time_high::TimeHigh;
 
-const TIME_HIGH_WRAP: i64 = 1 << 24;
 /// What one carry of the 12-bit `TIME_LOW` adds under [`Evt3TimeLow::CarryOnStepBack`].
 const TIME_LOW_CARRY: i64 = 1 << 12;
 
@@ -78,7 +78,9 @@ impl std::str::FromStr for Evt3TimeLow {
 /// The state EVT 3.0 words carry from one to the next: time base, row, vector base.
 pub struct Evt3Words {
     time_low: i64,
-    time_high: i64,
+    /// Bits 12..24 of the time.
+    time_high: TimeHigh,
+    /// The header's time offset plus the carries of [`Evt3TimeLow::CarryOnStepBack`].
     wraps: i64,
     y: u16,
     base_x: u16,
@@ -96,7 +98,7 @@ impl Evt3Decoder {
             sensor_size,
             Evt3Words {
                 time_low: 0,
-                time_high: 0,
+                time_high: TimeHigh::new(12, 1 << 12),
                 wraps: time_offset,
                 y: 0,
                 base_x: 0,
@@ -130,7 +132,7 @@ impl RecordFormat for Evt3Words {
         // Saturating: adversarial input can repeat wraps past the i64 range.
         let t = self
             .wraps
-            .saturating_add((self.time_high << 12) + self.time_low);
+            .saturating_add(self.time_high.base_us().saturating_add(self.time_low));
         match word >> 12 {
             0x0 => self.y = word & 0x7ff,
             0x2 => {
@@ -165,13 +167,9 @@ impl RecordFormat for Evt3Words {
                 }
                 self.time_low = time_low;
             }
-            0x8 => {
-                let time_high = (word & 0xfff) as i64;
-                if time_high < self.time_high {
-                    self.wraps = self.wraps.saturating_add(TIME_HIGH_WRAP);
-                }
-                self.time_high = time_high;
-            }
+            0x8 => self
+                .time_high
+                .update((word & 0xfff) as i64, offset, &mut admission.report),
             0x7 | 0xA | 0xE | 0xF => {}
             _ => admission.report.skip_word(offset),
         }

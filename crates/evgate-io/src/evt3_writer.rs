@@ -3,8 +3,9 @@
 //! one `ADDR_X` word.
 //!
 //! The format's time base is 24 bits with wraps detected on `TIME_HIGH`, so events must be in
-//! non-decreasing time; a gap of more than 4095 `TIME_HIGH` units is bridged with intermediate
-//! `TIME_HIGH` words so a decoder counts every wrap. Times are written relative to the first
+//! non-decreasing time; a gap of more than [`MAX_TIME_HIGH_STEP_US`] is bridged with
+//! intermediate `TIME_HIGH` words, as a sensor sends them, so a decoder counts every wrap and
+//! never takes a step for a corrupt word ([`crate::time_high`]). Times are written relative to the first
 //! event's time rounded down to a multiple of 2^24 µs, declared in the header as
 //! `% evgate_time_offset_us N` (our decoder adds it back; other readers see the times modulo
 //! it): absolute times (AEDAT 4 records Unix time) would otherwise need millions of bridging
@@ -16,14 +17,15 @@ use std::path::PathBuf;
 use evgate_core::{Event, SensorSize};
 
 use crate::format::Format;
+use crate::time_high::MAX_TIME_HIGH_STEP_US;
 use crate::writer::{io_error, EncodeError, EventWriter};
 
 /// Coordinates are 11-bit fields.
 const MAX_SIDE: u16 = 2048;
 /// The time offset is a whole number of 24-bit wraps, so the low bits are written unchanged.
 const TIME_BASE_WRAP: i64 = 1 << 24;
-/// The largest `TIME_HIGH` step a decoder reads unambiguously (a smaller 12-bit value = a wrap).
-const MAX_TIME_HIGH_STEP: u64 = 4095;
+/// The largest `TIME_HIGH` step, in units of 4096 µs, that a decoder takes as the stream's own.
+const MAX_TIME_HIGH_STEP: u64 = (MAX_TIME_HIGH_STEP_US >> 12) as u64;
 
 pub struct Evt3Writer<W: Write> {
     path: PathBuf,

@@ -34,6 +34,7 @@ pub mod report;
 pub mod sequence;
 pub mod source;
 pub mod stream_decoder;
+pub mod time_high;
 pub mod writer;
 
 pub use error::DecodeError;

@@ -11,6 +11,8 @@
 //!   with the index of the first such event among the delivered ones and the largest step back);
 //! - a word of an unknown or unsupported type is skipped and counted (`skipped_words`, with the
 //!   byte offset of the first one);
+//! - an EVT `TIME_HIGH` that jumps implausibly far is ignored and counted
+//!   (`implausible_time_jumps`; see [`crate::time_high`] for when a jump is followed);
 //! - everything else that is wrong (bad magic or header, truncation, unparsable text) is an error.
 
 pub use evgate_core::MAX_EVENT_TIME_US;
@@ -31,6 +33,9 @@ pub struct DecodeReport {
     pub largest_time_regression_us: i64,
     pub skipped_words: u64,
     pub first_skipped_word_offset: Option<u64>,
+    /// EVT `TIME_HIGH` words ignored as corrupt ([`crate::time_high`]).
+    pub implausible_time_jumps: u64,
+    pub first_implausible_time_jump_offset: Option<u64>,
 }
 
 impl DecodeReport {
@@ -40,6 +45,7 @@ impl DecodeReport {
             && self.dropped_out_of_time_range == 0
             && self.time_regressions == 0
             && self.skipped_words == 0
+            && self.implausible_time_jumps == 0
     }
 
     pub fn skip_word(&mut self, offset: u64) {
@@ -144,10 +150,17 @@ mod tests {
         let mut admission = Admission::new(SensorSize::new(4, 4));
         let mut out = Vec::new();
         admission.admit(&mut out, Event::new(5, 0, 0, true), 0);
-        admission.admit(&mut out, Event::new(9_223_372_036_854_775_000, 1, 1, true), 20);
+        admission.admit(
+            &mut out,
+            Event::new(9_223_372_036_854_775_000, 1, 1, true),
+            20,
+        );
         admission.admit(&mut out, Event::new(i64::MIN, 1, 1, true), 40);
         admission.admit(&mut out, Event::new(6, 0, 0, true), 60);
-        assert_eq!(out, vec![Event::new(5, 0, 0, true), Event::new(6, 0, 0, true)]);
+        assert_eq!(
+            out,
+            vec![Event::new(5, 0, 0, true), Event::new(6, 0, 0, true)]
+        );
         assert_eq!(admission.report.dropped_out_of_time_range, 2);
         assert_eq!(admission.report.first_out_of_time_range_offset, Some(20));
         assert_eq!(admission.report.time_regressions, 0);

@@ -14,7 +14,11 @@ pub enum BatchError {
         actual: usize,
     },
     #[error("batch {sequence}: header fields first-event-index = {first} + event-count = {count} overflow u64")]
-    IndexOverflow { sequence: u64, first: u64, count: u64 },
+    IndexOverflow {
+        sequence: u64,
+        first: u64,
+        count: u64,
+    },
     #[error("batch {sequence}: header span t-begin-us = {begin} .. t-end-us = {end} is reversed or outside ±{MAX_EVENT_TIME_US}")]
     Span { sequence: u64, begin: i64, end: i64 },
 }
@@ -103,7 +107,11 @@ impl BatchHeader {
                 actual: payload_len,
             });
         }
-        if self.first_event_index.checked_add(self.event_count).is_none() {
+        if self
+            .first_event_index
+            .checked_add(self.event_count)
+            .is_none()
+        {
             return Err(BatchError::IndexOverflow {
                 sequence,
                 first: self.first_event_index,
@@ -165,7 +173,11 @@ mod tests {
         good.validate(3).unwrap();
         assert!(matches!(
             good.validate(2),
-            Err(BatchError::EventCount { announced: 3, actual: 2, .. })
+            Err(BatchError::EventCount {
+                announced: 3,
+                actual: 2,
+                ..
+            })
         ));
         let overflowing = BatchHeader {
             first_event_index: u64::MAX - 1,

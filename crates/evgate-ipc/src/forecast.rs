@@ -242,9 +242,6 @@ mod tests {
         );
         let mut anonymous = header(&[10], 1);
         anonymous.source_stream_id = 0;
-        assert_eq!(
-            anonymous.validate(1, 2),
-            Err(ForecastError::NoSourceStream)
-        );
+        assert_eq!(anonymous.validate(1, 2), Err(ForecastError::NoSourceStream));
     }
 }

@@ -83,7 +83,8 @@ mod tests {
         std::fs::write(root.path().join(BUNDLED_LIBRARY), b"").unwrap();
         let nested = root.path().join("target/release");
         std::fs::create_dir_all(&nested).unwrap();
-        let found = locate_onnxruntime_from(None, std::slice::from_ref(&nested), current_user()).unwrap();
+        let found =
+            locate_onnxruntime_from(None, std::slice::from_ref(&nested), current_user()).unwrap();
         assert_eq!(found, root.path().join(BUNDLED_LIBRARY));
     }
 
@@ -94,13 +95,12 @@ mod tests {
         std::fs::write(root.path().join(BUNDLED_LIBRARY), b"").unwrap();
         let custom = root.path().join("custom.so");
         std::fs::write(&custom, b"").unwrap();
-        let found =
-            locate_onnxruntime_from(
-                Some(custom.clone().into()),
-                &[root.path().to_path_buf()],
-                current_user(),
-            )
-            .unwrap();
+        let found = locate_onnxruntime_from(
+            Some(custom.clone().into()),
+            &[root.path().to_path_buf()],
+            current_user(),
+        )
+        .unwrap();
         assert_eq!(found, custom);
     }
 
@@ -108,7 +108,8 @@ mod tests {
     fn missing_override_is_an_error_naming_it() {
         let root = tempfile::tempdir().unwrap();
         let missing = root.path().join("nowhere.so");
-        let error = locate_onnxruntime_from(Some(missing.clone().into()), &[], current_user()).unwrap_err();
+        let error =
+            locate_onnxruntime_from(Some(missing.clone().into()), &[], current_user()).unwrap_err();
         let message = error.to_string();
         assert!(
             message.contains(&missing.display().to_string()),
@@ -122,8 +123,8 @@ mod tests {
         let root = tempfile::tempdir().unwrap();
         let nested = root.path().join("a/b");
         std::fs::create_dir_all(&nested).unwrap();
-        let error =
-            locate_onnxruntime_from(None, std::slice::from_ref(&nested), current_user()).unwrap_err();
+        let error = locate_onnxruntime_from(None, std::slice::from_ref(&nested), current_user())
+            .unwrap_err();
         let message = error.to_string();
         for directory in [nested.as_path(), &root.path().join("a"), root.path()] {
             let candidate = directory.join(BUNDLED_LIBRARY).display().to_string();

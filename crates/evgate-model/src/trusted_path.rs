@@ -167,8 +167,7 @@ mod tests {
 
     fn private_directory() -> tempfile::TempDir {
         let directory = tempfile::tempdir().unwrap();
-        std::fs::set_permissions(directory.path(), std::fs::Permissions::from_mode(0o700))
-            .unwrap();
+        std::fs::set_permissions(directory.path(), std::fs::Permissions::from_mode(0o700)).unwrap();
         directory
     }
 
@@ -254,8 +253,7 @@ mod tests {
         let nested = root.path().join("a/b");
         std::fs::create_dir_all(&nested).unwrap();
         let relative = Path::new("models/m.onnx");
-        match find_in_ancestors(relative, std::slice::from_ref(&nested), current_user()).unwrap()
-        {
+        match find_in_ancestors(relative, std::slice::from_ref(&nested), current_user()).unwrap() {
             Search::Missing(looked_at) => {
                 assert_eq!(looked_at[0], nested.join(relative));
                 assert!(looked_at.contains(&root.path().join(relative)));

@@ -208,6 +208,13 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             .first_skipped_word_offset
             .map_or(String::new(), |o| format!(" (first at byte {o})"))
     );
+    println!(
+        "time jumps      {} TIME_HIGH words ignored as corrupt{}",
+        report.implausible_time_jumps,
+        report
+            .first_implausible_time_jump_offset
+            .map_or(String::new(), |o| format!(" (first at byte {o})"))
+    );
     println!("decode time     {:.3} s", info.decode_seconds);
     Ok(())
 }

@@ -154,7 +154,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             model.display()
         ),
         (None, false) => {
-            let sensor = default_model::source_sensor(args.input.as_deref(), args.sensor, &args.preset)?;
+            let sensor =
+                default_model::source_sensor(args.input.as_deref(), args.sensor, &args.preset)?;
             let search_from: Vec<PathBuf> = binary_directory().into_iter().collect();
             Some(default_model::shipped_model_for(sensor, &search_from)?)
         }

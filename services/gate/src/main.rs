@@ -265,8 +265,7 @@ fn forecast_for<'a>(
     header: &BatchHeader,
 ) -> Option<&'a StoredForecast> {
     forecast.filter(|forecast| {
-        forecast.header.source_stream_id == header.stream_id
-            && forecast.sensor() == header.sensor()
+        forecast.header.source_stream_id == header.stream_id && forecast.sensor() == header.sensor()
     })
 }
 

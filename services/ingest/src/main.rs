@@ -326,12 +326,17 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
         labels.is_some(),
     );
     summary.input_report = source.decode_report();
-    if let Some(report) = summary.input_report.as_ref().filter(|report| !report.is_clean()) {
+    if let Some(report) = summary
+        .input_report
+        .as_ref()
+        .filter(|report| !report.is_clean())
+    {
         warn!(
             dropped_out_of_sensor = report.dropped_out_of_sensor,
             dropped_out_of_time_range = report.dropped_out_of_time_range,
             time_regressions = report.time_regressions,
             skipped_words = report.skipped_words,
+            implausible_time_jumps = report.implausible_time_jumps,
             "the input needed repairs (see input-report in the summary)"
         );
     }

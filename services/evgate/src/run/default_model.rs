@@ -47,10 +47,7 @@ pub fn source_sensor(
 /// the checkout's models); like the runtime library, only where no other user could have put it.
 pub fn shipped_model_for(sensor: SensorSize, search_from: &[PathBuf]) -> anyhow::Result<PathBuf> {
     let padded = sensor.padded_to(16);
-    let Some((file, _)) = SHIPPED
-        .iter()
-        .find(|(_, input)| Some(*input) == padded)
-    else {
+    let Some((file, _)) = SHIPPED.iter().find(|(_, input)| Some(*input) == padded) else {
         let shipped: Vec<String> = SHIPPED
             .iter()
             .map(|(file, input)| format!("models/{file} ({input})"))
@@ -66,9 +63,11 @@ pub fn shipped_model_for(sensor: SensorSize, search_from: &[PathBuf]) -> anyhow:
     let relative = Path::new("models").join(file);
     match trusted_path::find_in_ancestors(&relative, search_from, trusted_path::current_user())
         .with_context(|| {
-            format!("the shipped model {} cannot be used; pass --model", relative.display())
-        })?
-    {
+            format!(
+                "the shipped model {} cannot be used; pass --model",
+                relative.display()
+            )
+        })? {
         Search::Found(path) => Ok(path),
         Search::Missing(looked_at) => bail!(
             "the shipped model models/{file} for a {sensor} sensor is missing (looked at {}); \
