@@ -197,3 +197,62 @@ fn a_crashed_gate_is_cleaned_up_and_its_replacement_serves_a_restarted_ingest() 
     );
     assert_eq!(gate_summary["balanced"], true);
 }
+
+/// Issue 15: under a flood the gate's drain loop never returned to its waitset, so SIGTERM
+/// was ignored for as long as input kept coming.
+#[test]
+fn the_gate_ends_on_sigterm_under_a_flood() {
+    let names = unique_names("flood");
+    let node = create_node("flood-test").unwrap();
+    let mut gate = start_gate(&names, &[]);
+    let events = SlicePublisher::<Event, BatchHeader>::open(
+        &node,
+        &names,
+        Stream::Events,
+        &Qos::with_overflow(evgate_ipc::Overflow::DropAndCount),
+    )
+    .unwrap();
+    wait_until("the gate subscribes", TIMEOUT, || {
+        events.subscriber_count() > 0
+    })
+    .unwrap();
+    // Large batches in bursts: each costs the gate a judgement and two copies, the test one
+    // copy, so the gate's queue never empties.
+    let batch: Vec<Event> = (0..4096).map(|i| Event::new(i, 1, 1, true)).collect();
+    let started = Instant::now();
+    let mut signalled = false;
+    let mut sequence = 0u64;
+    while gate.is_running() {
+        assert!(
+            started.elapsed() < TIMEOUT,
+            "the gate still runs {TIMEOUT:?} after SIGTERM under a flood"
+        );
+        let header = BatchHeader {
+            stream_id: 3,
+            sequence,
+            first_event_index: sequence * batch.len() as u64,
+            event_count: batch.len() as u64,
+            t_begin_us: 0,
+            t_end_us: 4096,
+            width: 8,
+            height: 8,
+            ..Default::default()
+        };
+        for burst in 0..16 {
+            let header = BatchHeader {
+                sequence: sequence + burst,
+                first_event_index: (sequence + burst) * batch.len() as u64,
+                ..header
+            };
+            events.publish(header, &batch).unwrap();
+        }
+        sequence += 16;
+        if !signalled && started.elapsed() > Duration::from_secs(1) {
+            gate.signal(libc::SIGTERM);
+            signalled = true;
+        }
+    }
+    let summary = gate.summary(TIMEOUT).unwrap();
+    assert_eq!(summary["ended-by"], "signal");
+    assert_eq!(summary["balanced"], true);
+}

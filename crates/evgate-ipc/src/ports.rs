@@ -3,7 +3,7 @@
 
 use std::fmt::Debug;
 use std::mem::MaybeUninit;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::port::listener::Listener;
@@ -361,6 +361,29 @@ where
     pub fn publish(&self, header: H, items: &[T]) -> Result<Delivery, PortError> {
         let sample = self.loan(header, items.len())?;
         self.send(sample.write_from_slice(items))
+    }
+
+    /// Publishes a copy of `items` again until every connected subscriber got it, dead readers
+    /// were cleaned up, `deadline` passed or a signal arrived: for the end-of-stream marker,
+    /// which readers wait for and must not lose to a full buffer. A reader that got an earlier
+    /// copy gets another; readers ignore repeated end-of-stream markers.
+    pub fn publish_until_delivered(
+        &self,
+        node: &Node<Service>,
+        header: H,
+        items: &[T],
+        deadline: Instant,
+    ) -> Result<Delivery, PortError> {
+        loop {
+            let delivery = self.publish(header, items)?;
+            if delivery.undelivered == 0 {
+                return Ok(delivery);
+            }
+            node.try_cleanup_dead_nodes();
+            if Instant::now() >= deadline || node.wait(Duration::from_millis(10)).is_err() {
+                return Ok(delivery);
+            }
+        }
     }
 
     /// Publishes `len` elements that `fill` writes in place, front to back, through a

@@ -130,3 +130,79 @@ fn forecasts_reach_a_late_subscriber_and_stats_keep_the_newest() {
     assert_eq!(reader.latest().unwrap().map(|s| s.sequence), Some(39));
     assert_eq!(reader.latest().unwrap(), None);
 }
+
+/// Issue 15: the end-of-stream marker went through the same discarding path, so a reader
+/// that was full for a moment never learnt that the stream had ended.
+#[test]
+fn the_end_of_stream_marker_waits_for_a_full_reader() {
+    let names = unique_names("eos");
+    let (ready_sender, ready) = std::sync::mpsc::channel();
+    let reader_names = names.clone();
+    // Subscribers stay on their thread (they are not Send): this one connects, lets its
+    // one-sample buffer fill, stays busy past the publisher's block timeout, then reads.
+    let reader = std::thread::spawn(move || {
+        let node = create_node("ipc-test-eos-reader").unwrap();
+        let reader_qos = Qos {
+            buffer_size: 1,
+            ..Qos::default()
+        };
+        let subscriber = SliceSubscriber::<Event, BatchHeader>::open(
+            &node,
+            &reader_names,
+            Stream::Events,
+            &reader_qos,
+        )
+        .unwrap();
+        ready_sender.send(()).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(400));
+        let mut headers = Vec::new();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+        while std::time::Instant::now() < deadline {
+            match subscriber.receive().unwrap() {
+                Some(sample) => {
+                    headers.push(*sample.user_header());
+                    if sample.user_header().is_end_of_stream() {
+                        break;
+                    }
+                }
+                None => std::thread::sleep(std::time::Duration::from_millis(1)),
+            }
+        }
+        headers
+    });
+    ready
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .unwrap();
+    let node = create_node("ipc-test-eos").unwrap();
+    let publisher = SlicePublisher::<Event, BatchHeader>::open(
+        &node,
+        &names,
+        Stream::Events,
+        &Qos {
+            overflow: Overflow::Block,
+            block_timeout_ms: 50,
+            ..Qos::default()
+        },
+    )
+    .unwrap();
+    let data = BatchHeader::default();
+    assert_eq!(publisher.publish(data, &[]).unwrap().undelivered, 0);
+    let end = BatchHeader {
+        sequence: 1,
+        flags: evgate_ipc::BatchFlags::END_OF_STREAM,
+        ..Default::default()
+    };
+    // A plain publish would be discarded after 50 ms; this one is retried.
+    let delivery = publisher
+        .publish_until_delivered(
+            &node,
+            end,
+            &[],
+            std::time::Instant::now() + std::time::Duration::from_secs(30),
+        )
+        .unwrap();
+    assert_eq!(delivery.undelivered, 0);
+    let headers = reader.join().unwrap();
+    assert_eq!(headers.first(), Some(&data));
+    assert_eq!(headers.last(), Some(&end));
+}

@@ -55,7 +55,9 @@ impl Accounting {
             self.expected_index = Some(joined);
         }
         let expected = self.expected_index.unwrap_or(0);
-        if header.end_event_index() <= expected && header.event_count > 0 {
+        // The ingest repeats the end-of-stream marker until every reader has it.
+        let repeated_end = header.is_end_of_stream() && self.stats.end_of_stream == 1;
+        if (header.end_event_index() <= expected && header.event_count > 0) || repeated_end {
             warn!(sequence = header.sequence, "batch already counted: ignored");
             return Admission::Duplicate;
         }
@@ -126,6 +128,19 @@ mod tests {
         assert_eq!(accounting.stats.input_events, 30);
         assert!(accounting.stats.is_balanced());
         assert_eq!(accounting.admit(&header(1, 10, 15)), Admission::Duplicate);
+    }
+
+    #[test]
+    fn a_repeated_end_of_stream_marker_is_counted_once() {
+        let mut accounting = Accounting::default();
+        accounting.admit(&header(0, 0, 10));
+        let end = BatchHeader {
+            flags: evgate_ipc::BatchFlags::END_OF_STREAM,
+            ..header(1, 10, 0)
+        };
+        assert_eq!(accounting.admit(&end), Admission::Accept { lost_events: 0 });
+        assert_eq!(accounting.admit(&end), Admission::Duplicate);
+        assert_eq!(accounting.stats.input_batches, 2);
     }
 
     #[test]

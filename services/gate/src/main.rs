@@ -211,19 +211,29 @@ fn run(args: &Args) -> anyhow::Result<GateSummary> {
     let started = Instant::now();
     let mut failure = None;
     let mut reached_end = false;
+    let mut stopped_by_signal = false;
     let on_wakeup = |attachment: WaitSetAttachmentId<evgate_ipc::Service>| {
         let step = if attachment.has_event_from(&forecast_guard) {
             forecasts.clear_wakeups();
             gate.take_forecasts(&forecasts).map(|()| false)
         } else if attachment.has_event_from(&events_guard) {
             events.clear_wakeups();
-            gate.drain_events(&events, &forecasts)
+            gate.drain_events(&node, &events, &forecasts)
+                .map(|drained| match drained {
+                    Drained::EndOfStream => true,
+                    Drained::Signal => {
+                        stopped_by_signal = true;
+                        true
+                    }
+                    Drained::Empty => false,
+                })
         } else if attachment.has_event_from(&stats_tick) {
             gate.publish_stats().map(|()| false)
         } else {
             Ok(false)
         };
         match step {
+            Ok(true) if stopped_by_signal => CallbackProgression::Stop,
             Ok(true) if args.exit_at_end_of_stream => {
                 reached_end = true;
                 CallbackProgression::Stop
@@ -246,6 +256,7 @@ fn run(args: &Args) -> anyhow::Result<GateSummary> {
         return Err(error);
     }
     let ended_by = match outcome {
+        _ if stopped_by_signal => "signal",
         WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => "signal",
         _ if reached_end => "end-of-stream",
         _ => "signal",
@@ -257,6 +268,19 @@ fn run(args: &Args) -> anyhow::Result<GateSummary> {
         wall_s: started.elapsed().as_secs_f64(),
         ended_by,
     })
+}
+
+/// Batches gated between two looks for a termination signal.
+const SIGNAL_CHECK_BATCHES: u32 = 16;
+
+/// How a drain of the events queue ended.
+enum Drained {
+    /// The queue is empty.
+    Empty,
+    /// The end-of-stream batch was among the batches.
+    EndOfStream,
+    /// A termination signal arrived.
+    Signal,
 }
 
 /// The stored forecast when it describes this stream and sensor.
@@ -293,14 +317,21 @@ impl Gate {
         Ok(())
     }
 
-    /// Gates every waiting batch; true when the end-of-stream batch was among them.
+    /// Gates every waiting batch, stopping early for a signal: under a sustained flood the
+    /// queue never empties, so this loop never returns to the waitset that watches for them.
     fn drain_events(
         &mut self,
+        node: &evgate_ipc::Node,
         events: &SliceSubscriber<Event, BatchHeader>,
         forecasts: &SliceSubscriber<u64, ForecastHeader>,
-    ) -> anyhow::Result<bool> {
+    ) -> anyhow::Result<Drained> {
         let mut reached_end = false;
+        let mut batches = 0u32;
         while let Some(sample) = events.receive()? {
+            batches = batches.wrapping_add(1);
+            if batches % SIGNAL_CHECK_BATCHES == 0 && node.wait(Duration::ZERO).is_err() {
+                return Ok(Drained::Signal);
+            }
             // A forecast that arrived meanwhile judges this batch already.
             self.take_forecasts(forecasts)?;
             // Copied before it is checked: the publisher may still write the shared memory.
@@ -310,17 +341,26 @@ impl Gate {
                 warn!(%error, "batch ignored");
                 continue;
             }
-            reached_end |= self.gate_batch(&header, sample.payload())?;
+            reached_end |= self.gate_batch(node, &header, sample.payload())?;
             // Under a sustained flood this loop does not return to the waitset, whose interval
             // would then never fire.
             if self.stats_published_at.elapsed() >= self.stats_interval {
                 self.publish_stats()?;
             }
         }
-        Ok(reached_end)
+        Ok(if reached_end {
+            Drained::EndOfStream
+        } else {
+            Drained::Empty
+        })
     }
 
-    fn gate_batch(&mut self, header: &BatchHeader, events: &[Event]) -> anyhow::Result<bool> {
+    fn gate_batch(
+        &mut self,
+        node: &evgate_ipc::Node,
+        header: &BatchHeader,
+        events: &[Event],
+    ) -> anyhow::Result<bool> {
         let lost_events = match self.accounting.admit(header) {
             Admission::Accept { lost_events } => lost_events,
             Admission::Duplicate => return Ok(false),
@@ -364,6 +404,11 @@ impl Gate {
             undelivered += keep_bitmap
                 .publish(out_header, &self.judge.pass)?
                 .undelivered;
+        }
+        if undelivered > 0 {
+            // A consumer that stopped taking samples may have died: free its port so later
+            // batches do not wait for it (under --overflow block, one timeout per batch).
+            node.try_cleanup_dead_nodes();
         }
         let stats = &mut self.accounting.stats;
         stats.output_samples_undelivered += undelivered as u64;

@@ -308,12 +308,23 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
             node.try_cleanup_dead_nodes();
         }
         progress.set_position(totals.events);
-        if header.is_end_of_stream() {
+        // A flagged last batch some reader did not get is followed by a marker it will get.
+        if header.is_end_of_stream() && delivery.undelivered == 0 {
             totals.end_of_stream_sent = true;
         }
     }
-    if !totals.end_of_stream_sent {
-        publish_end_of_stream(&events, labels.as_ref(), stream_id, sensor, &mut totals)?;
+    if !totals.end_of_stream_sent && ended_by == "end-of-stream" {
+        let deadline =
+            Instant::now() + Duration::from_millis(args.linger_ms.max(args.block_timeout_ms));
+        publish_end_of_stream(
+            &node,
+            &events,
+            labels.as_ref(),
+            stream_id,
+            sensor,
+            &mut totals,
+            deadline,
+        )?;
     }
     progress.finish_and_clear();
     let mut summary = summary_of(
@@ -371,13 +382,16 @@ impl Totals {
     }
 }
 
-/// An empty batch flagged end-of-stream tells every reader that nothing follows.
+/// An empty batch flagged end-of-stream tells every reader that nothing follows; it is sent
+/// again until every reader has it (or `deadline`), since readers wait for it.
 fn publish_end_of_stream(
+    node: &evgate_ipc::Node,
     events: &SlicePublisher<Event, BatchHeader>,
     labels: Option<&SlicePublisher<u16, BatchHeader>>,
     stream_id: u64,
     sensor: evgate_core::SensorSize,
     totals: &mut Totals,
+    deadline: Instant,
 ) -> anyhow::Result<()> {
     let t = totals.last_end.unwrap_or(0);
     let mut header = BatchHeader {
@@ -393,12 +407,18 @@ fn publish_end_of_stream(
         flags: BatchFlags::END_OF_STREAM,
     };
     if let Some(labels) = labels {
-        labels.publish(header, &[])?;
+        labels.publish_until_delivered(node, header, &[], deadline)?;
     }
     header.published_at_monotonic_ns = clock::monotonic_ns();
-    let delivery = events.publish(header, &[])?;
+    let delivery = events.publish_until_delivered(node, header, &[], deadline)?;
+    if delivery.undelivered > 0 {
+        warn!(
+            readers = delivery.undelivered,
+            "the end-of-stream marker did not reach every reader"
+        );
+    }
     totals.record(&header, delivery.undelivered);
-    totals.end_of_stream_sent = true;
+    totals.end_of_stream_sent = delivery.undelivered == 0;
     Ok(())
 }
 
