@@ -1,6 +1,7 @@
-"""Writes starting inputs for the EVIMO fuzz targets into fuzz/corpus/<target>/ (ignored by
-git), as NumPy itself saves the files (see docs/fuzzing.md). Needs numpy, e.g. the training
-venv:
+"""Writes the committed seed corpus, fuzz/seeds/<target>/, of every fuzz target (see
+docs/fuzzing.md): prefixes of the real recordings in ../shared/data for the byte-stream
+decoders, small files written here for the text, DAT and .evg formats, and files NumPy itself
+saves for the EVIMO and .npy targets. Needs numpy, e.g. the training venv:
 
     models/training/.venv/bin/python fuzz/make_seeds.py
 """
@@ -12,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-CORPUS = Path(__file__).with_name("corpus")
+CORPUS = Path(__file__).with_name("seeds")
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 HEIGHT, WIDTH, FRAMES = 8, 12, 2
 
 
@@ -52,7 +54,54 @@ def write(target: str, name: str, data: bytes) -> None:
     print(f"{folder / name}: {len(data)} bytes")
 
 
+def prophesee_prefix(name: str, header_lines: int, words: int, word_bytes: int) -> bytes:
+    """The `%` header of a real RAW file and its first `words` words."""
+    data = (REAL / name).read_bytes()
+    end = 0
+    for _ in range(header_lines):
+        if not data[end:].startswith(b"%"):
+            break
+        end = data.index(b"\n", end) + 1
+    return data[: end + words * word_bytes]
+
+
+def dat_file() -> bytes:
+    header = b"% Date 2020-01-01\n% Height 8\n% Width 12\n"
+    records = b"".join(
+        struct.pack("<II", 100 * i, (i % 12) | ((i % 8) << 14) | ((i % 2) << 28))
+        for i in range(6)
+    )
+    return header + bytes([0, 8]) + records
+
+
+def native_file() -> bytes:
+    """An .evg as `evgate convert` writes it, read back from the prefix of its first bytes."""
+    import subprocess
+    import tempfile
+
+    root = Path(__file__).resolve().parents[1]
+    binary = root / "target" / "debug" / "evgate"
+    with tempfile.TemporaryDirectory() as scratch:
+        text = Path(scratch) / "in.csv"
+        text.write_text("".join(f"{10 * i},{i % 12},{i % 8},{i % 2}\n" for i in range(8)))
+        out = Path(scratch) / "out.evg"
+        subprocess.run(
+            [str(binary), "convert", "--sensor", "12x8", str(text), str(out)], check=True,
+            capture_output=True,
+        )
+        return out.read_bytes()
+
+
 def main() -> None:
+    write("evt2", "seed-evt2.raw", prophesee_prefix("evt2_sample.raw", 64, 1024, 4))
+    write("evt3", "seed-evt3.raw", prophesee_prefix("evt3_sample.raw", 64, 2048, 2))
+    write("aedat4", "seed.aedat4", (REAL / "sample.aedat4").read_bytes()[:12_000])
+    write("dat", "seed.dat", dat_file())
+    write("csv", "seed.csv", b"t,x,y,p\n10,1,2,1\n# note\n0.5 3 4 -1\n12,5,6,0\n")
+    write("native", "seed.evg", native_file())
+    write("npy", "seed-scalar.npy", npy(np.arange(6, dtype=np.int64)))
+    record = np.zeros(3, dtype=[("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+    write("npy", "seed-record.npy", npy(record))
     write("evimo_npz", "seed-stored.npz", single_npz(False))
     write("evimo_npz", "seed-deflated.npz", single_npz(True))
     # Without res_x/res_y the frame size comes from the mask header alone.

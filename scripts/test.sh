@@ -21,8 +21,8 @@ echo "== cargo fmt --check"
 cargo fmt --all --check
 echo "== cargo clippy"
 cargo clippy --workspace --all-targets --features evgate/dsec -- -D warnings
-echo "== cargo build of the fuzz targets (fuzz/, its own workspace)"
-cargo build --manifest-path fuzz/Cargo.toml
+echo "== fuzz: every target for ${EVGATE_FUZZ_SECONDS:-20} s from its committed seeds"
+bash scripts/fuzz-smoke.sh
 echo "== cargo build of the binaries the end-to-end tests start"
 # The same command as SERVICE_PACKAGES in tests/lib.rs: the tests' own build then finds them fresh
 # and never compiles or runs a build script from inside a test.

@@ -164,3 +164,43 @@ fn a_reader_that_connects_after_the_whole_recording_was_published_still_gets_all
     assert_eq!(received, events);
     assert_eq!(u64_at(&summary, "/events-published"), events);
 }
+
+/// Issue 15: a CSV time near i64::MAX made evgate-ingest publish nothing and never end, and a
+/// CSV without geometry read as a 65535×65535 sensor that the inference could not pad.
+#[test]
+fn hostile_text_input_ends_with_its_repairs_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = dir.path().join("t.csv");
+    std::fs::write(&text, "1,1,1,1\n9223372036854775000,1,1,1\n2,2,2,0\n").unwrap();
+    let names = unique_names("hostile-csv");
+    let without_sensor = start_service(
+        "evgate-ingest",
+        &names,
+        &["--json", "--fast", "--input", text.to_str().unwrap()],
+    )
+    .unwrap()
+    .wait(TIMEOUT)
+    .unwrap();
+    assert!(!without_sensor.0.success());
+    let mut ingest = start_service(
+        "evgate-ingest",
+        &names,
+        &[
+            "--json",
+            "--fast",
+            "--linger-ms",
+            "0",
+            "--sensor",
+            "8x8",
+            "--input",
+            text.to_str().unwrap(),
+        ],
+    )
+    .unwrap();
+    let summary = ingest.summary(TIMEOUT).unwrap();
+    assert_eq!(u64_at(&summary, "/events-published"), 2);
+    assert_eq!(
+        u64_at(&summary, "/input-report/dropped-out-of-time-range"),
+        1
+    );
+}

@@ -206,8 +206,7 @@ impl Aedat4Packets {
 fn decompressed_limit(compressed: usize) -> usize {
     compressed
         .saturating_mul(MAX_COMPRESSION_RATIO)
-        .max(SMALL_PACKET_BYTES)
-        .min(MAX_DECOMPRESSED_BYTES)
+        .clamp(SMALL_PACKET_BYTES, MAX_DECOMPRESSED_BYTES)
 }
 
 /// Decompresses one packet body into `packet`, stopping as soon as it passes its limit.

@@ -329,7 +329,7 @@ impl Gate {
         let mut batches = 0u32;
         while let Some(sample) = events.receive()? {
             batches = batches.wrapping_add(1);
-            if batches % SIGNAL_CHECK_BATCHES == 0 && node.wait(Duration::ZERO).is_err() {
+            if batches.is_multiple_of(SIGNAL_CHECK_BATCHES) && node.wait(Duration::ZERO).is_err() {
                 return Ok(Drained::Signal);
             }
             // A forecast that arrived meanwhile judges this batch already.

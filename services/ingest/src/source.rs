@@ -12,8 +12,8 @@ use evgate_sim::{LabelledEvent, Preset, Simulator};
 pub enum SourceError {
     #[error("cannot read labelled sequence {path}: {reason}")]
     Sequence { path: PathBuf, reason: String },
-    #[error("input {path} has no events")]
-    Empty { path: PathBuf },
+    #[error("input {path} has no events{dropped}")]
+    Empty { path: PathBuf, dropped: String },
     #[error(
         "input {path} does not give its sensor size (text event files carry none); pass \
          --sensor WIDTHxHEIGHT"
@@ -150,6 +150,7 @@ impl InMemory {
         if sequence.events.is_empty() {
             return Err(SourceError::Empty {
                 path: path.to_owned(),
+                dropped: String::new(),
             });
         }
         Ok(Self {
@@ -270,8 +271,13 @@ impl EventSource for Recording {
     ) -> Result<Chunk, SourceError> {
         if self.reader.read_chunk(&mut self.chunk)? == 0 {
             if self.first_t.is_none() {
+                let report = self.reader.report();
                 return Err(SourceError::Empty {
                     path: self.path.clone(),
+                    dropped: format!(
+                        " ({} dropped outside the sensor, {} outside ±2^60 µs)",
+                        report.dropped_out_of_sensor, report.dropped_out_of_time_range
+                    ),
                 });
             }
             return Ok(Chunk::End);
