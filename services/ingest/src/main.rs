@@ -313,7 +313,7 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
             totals.end_of_stream_sent = true;
         }
     }
-    if !totals.end_of_stream_sent && ended_by == "end-of-stream" {
+    if !totals.end_of_stream_sent {
         let deadline =
             Instant::now() + Duration::from_millis(args.linger_ms.max(args.block_timeout_ms));
         publish_end_of_stream(
