@@ -10,6 +10,12 @@ pub type Polarity = u8;
 /// horizons, prediction ages) on times within it cannot overflow.
 pub const MAX_EVENT_TIME_US: i64 = 1 << 60;
 
+/// True when `t` lies within ±[`MAX_EVENT_TIME_US`].
+#[inline]
+pub const fn is_event_time(t: i64) -> bool {
+    t.unsigned_abs() <= MAX_EVENT_TIME_US.unsigned_abs()
+}
+
 /// One event: time in microseconds, pixel coordinates, polarity.
 ///
 /// The layout matches AEDAT4 / dv-processing (16 bytes, 8-byte aligned) so a slice of events can

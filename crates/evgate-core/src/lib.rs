@@ -9,7 +9,7 @@ pub mod voxel;
 pub mod warp;
 pub mod window;
 
-pub use event::{Event, Polarity, MAX_EVENT_TIME_US};
+pub use event::{is_event_time, Event, Polarity, MAX_EVENT_TIME_US};
 pub use gate::{keep_bitmap, partition, ForecastView, GateCounts, GateError, GateMode};
 pub use geometry::SensorSize;
 pub use mask::{words_for, BitMask, MaskError, MaskView};

@@ -201,7 +201,6 @@ impl Aedat4Packets {
     }
 }
 
-/// Finds the event stream in the XML description: its id and, when given, its size.
 /// The most bytes a packet of `compressed` bytes may inflate to.
 fn decompressed_limit(compressed: usize) -> usize {
     compressed
@@ -238,6 +237,7 @@ fn inflate(compression: Compression, body: &[u8], packet: &mut Vec<u8>) -> Resul
     Ok(())
 }
 
+/// Finds the event stream in the XML description: its id and, when given, its size.
 fn event_stream(info: &str) -> Result<(i32, Option<SensorSize>), String> {
     let mut streams: Vec<(i32, String)> = Vec::new();
     for node in info.split("<node ").skip(1) {

@@ -4,9 +4,9 @@
 //! (0x3): base column and polarity for the vectors that follow; `VECT_12` (0x4) / `VECT_8`
 //! (0x5): a bit mask of events at base, base+1, … after which the base advances by 12 / 8;
 //! `TIME_LOW` (0x6) / `TIME_HIGH` (0x8): bits 0..12 / 12..24 of the time; `TIME_HIGH` steps,
-//! wraps of the 24-bit time and corrupt values follow [`crate::time_high`]. `CONTINUED_4` (0x7), `EXT_TRIGGER`
-//! (0xA), `OTHERS` (0xE) and `CONTINUED_12` (0xF) carry no CD events and are passed over; any
-//! other type is skipped and counted.
+//! wraps of the 24-bit time and corrupt values follow [`crate::time_high`]. `CONTINUED_4`
+//! (0x7), `EXT_TRIGGER` (0xA), `OTHERS` (0xE) and `CONTINUED_12` (0xF) carry no CD events and
+//! are passed over; any other type is skipped and counted.
 //!
 //! `% evgate_time_offset_us N` in the header (written by our encoder) is added to every time.
 //!
@@ -132,7 +132,7 @@ impl RecordFormat for Evt3Words {
         // Saturating: adversarial input can repeat wraps past the i64 range.
         let t = self
             .wraps
-            .saturating_add(self.time_high.base_us().saturating_add(self.time_low));
+            .saturating_add(self.time_high.base_us() + self.time_low);
         match word >> 12 {
             0x0 => self.y = word & 0x7ff,
             0x2 => {

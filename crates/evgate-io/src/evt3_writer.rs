@@ -5,8 +5,8 @@
 //! The format's time base is 24 bits with wraps detected on `TIME_HIGH`, so events must be in
 //! non-decreasing time; a gap of more than [`MAX_TIME_HIGH_STEP_US`] is bridged with
 //! intermediate `TIME_HIGH` words, as a sensor sends them, so a decoder counts every wrap and
-//! never takes a step for a corrupt word ([`crate::time_high`]). Times are written relative to the first
-//! event's time rounded down to a multiple of 2^24 µs, declared in the header as
+//! never takes a step for a corrupt word ([`crate::time_high`]). Times are written relative to
+//! the first event's time rounded down to a multiple of 2^24 µs, declared in the header as
 //! `% evgate_time_offset_us N` (our decoder adds it back; other readers see the times modulo
 //! it): absolute times (AEDAT 4 records Unix time) would otherwise need millions of bridging
 //! words. The header is therefore written with the first event (or by `finish`).

@@ -16,7 +16,7 @@
 //! - everything else that is wrong (bad magic or header, truncation, unparsable text) is an error.
 
 pub use evgate_core::MAX_EVENT_TIME_US;
-use evgate_core::{Event, SensorSize};
+use evgate_core::{is_event_time, Event, SensorSize};
 use serde::Serialize;
 
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
@@ -82,7 +82,7 @@ impl Admission {
             self.report.first_out_of_sensor_offset.get_or_insert(offset);
             return;
         }
-        if event.t.unsigned_abs() > MAX_EVENT_TIME_US.unsigned_abs() {
+        if !is_event_time(event.t) {
             self.report.dropped_out_of_time_range += 1;
             self.report
                 .first_out_of_time_range_offset

@@ -15,6 +15,10 @@ use crate::report::DecodeReport;
 /// The largest forward step of one `TIME_HIGH` taken as the stream's own (about one second).
 pub const MAX_TIME_HIGH_STEP_US: i64 = 1 << 20;
 
+/// Where the sum of wraps stops growing: far past any time a decoder delivers (±2^60 µs), yet
+/// far enough below `i64::MAX` that adding the high and low bits of a word cannot overflow.
+const WRAPPED_US_CAP: i64 = i64::MAX / 2;
+
 /// The time base that `TIME_HIGH` words carry.
 pub struct TimeHigh {
     unit_us: i64,
@@ -42,7 +46,8 @@ impl TimeHigh {
         }
     }
 
-    /// Microseconds of the accepted high bits, wraps included.
+    /// Microseconds of the accepted high bits, wraps included; adding a word's low bits to it
+    /// cannot overflow.
     #[inline]
     pub fn base_us(&self) -> i64 {
         self.base_us
@@ -58,8 +63,8 @@ impl TimeHigh {
         let plausible = |from: i64| step_us(from) <= MAX_TIME_HIGH_STEP_US;
         if plausible(current) || self.candidate.is_some_and(plausible) {
             if value < current {
-                // Saturating: adversarial input can repeat wraps past the i64 range.
-                self.wrapped_us = self.wrapped_us.saturating_add(self.range * self.unit_us);
+                // Capped: adversarial input can repeat wraps past the i64 range.
+                self.wrapped_us = (self.wrapped_us + self.range * self.unit_us).min(WRAPPED_US_CAP);
             }
             self.accept(value);
         } else {
@@ -74,7 +79,7 @@ impl TimeHigh {
     fn accept(&mut self, value: i64) {
         self.current = Some(value);
         self.candidate = None;
-        self.base_us = self.wrapped_us.saturating_add(value * self.unit_us);
+        self.base_us = self.wrapped_us + value * self.unit_us;
     }
 }
 

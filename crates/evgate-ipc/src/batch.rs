@@ -1,6 +1,6 @@
 //! The user header of every per-event stream (events, labels, kept, suppressed, keep-bitmap).
 
-use evgate_core::{SensorSize, MAX_EVENT_TIME_US};
+use evgate_core::{is_event_time, SensorSize, MAX_EVENT_TIME_US};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// A batch whose header does not describe its payload; readers skip it (its events then show
@@ -96,8 +96,8 @@ impl BatchHeader {
     }
 
     /// Checks that the header describes a payload of `payload_len` events (or labels: one per
-    /// event; a keep bitmap is shorter). Validate a copy, never
-    /// the header in shared memory: its publisher can still write it.
+    /// event; a keep bitmap is shorter). Validate a copy, never the header in shared memory:
+    /// its publisher can still write it.
     pub fn validate(&self, payload_len: usize) -> Result<(), BatchError> {
         let sequence = self.sequence;
         if self.event_count != payload_len as u64 {
@@ -118,8 +118,7 @@ impl BatchHeader {
                 count: self.event_count,
             });
         }
-        let in_range = |t: i64| t.unsigned_abs() <= MAX_EVENT_TIME_US.unsigned_abs();
-        if !(in_range(self.t_begin_us) && in_range(self.t_end_us))
+        if !(is_event_time(self.t_begin_us) && is_event_time(self.t_end_us))
             || self.t_begin_us > self.t_end_us
         {
             return Err(BatchError::Span {

@@ -1,6 +1,6 @@
 //! The user header of the forecast stream and the layout of its mask words.
 
-use evgate_core::MAX_EVENT_TIME_US;
+use evgate_core::{is_event_time, MAX_EVENT_TIME_US};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Most horizons one forecast carries.
@@ -119,7 +119,7 @@ impl ForecastHeader {
             ("reference-time-us", self.reference_time_us),
             ("window-start-us", self.window_start_us),
         ] {
-            if value.unsigned_abs() > MAX_EVENT_TIME_US.unsigned_abs() {
+            if !is_event_time(value) {
                 return Err(ForecastError::Time { field, value });
             }
         }

@@ -55,15 +55,26 @@ pub fn current_user() -> u32 {
 }
 
 /// Checks that `found`, and each directory above it, is owned by `user` or root and writable by
-/// nobody else (sticky directories excepted).
+/// nobody else (sticky directories excepted); for a link, both the path as named and where it
+/// leads.
 pub fn check_trusted(found: &Path, user: u32) -> Result<(), UntrustedPath> {
-    let absolute = std::path::absolute(found).map_err(|source| UntrustedPath::Inspect {
+    let inspect = |offender: &Path, source| UntrustedPath::Inspect {
         found: found.to_path_buf(),
-        offender: found.to_path_buf(),
+        offender: offender.to_path_buf(),
         source,
-    })?;
-    for (depth, offender) in absolute.ancestors().enumerate() {
-        // A link among these is followed here; where it leads is checked below.
+    };
+    let absolute = std::path::absolute(found).map_err(|source| inspect(found, source))?;
+    let resolved = std::fs::canonicalize(&absolute).map_err(|source| inspect(&absolute, source))?;
+    check_ancestors(found, &absolute, user)?;
+    if resolved != absolute {
+        check_ancestors(found, &resolved, user)?;
+    }
+    Ok(())
+}
+
+/// [`check_trusted`] for `path` and its ancestors, naming `found` in errors.
+fn check_ancestors(found: &Path, path: &Path, user: u32) -> Result<(), UntrustedPath> {
+    for (depth, offender) in path.ancestors().enumerate() {
         let metadata = std::fs::metadata(offender).map_err(|source| UntrustedPath::Inspect {
             found: found.to_path_buf(),
             offender: offender.to_path_buf(),
@@ -87,35 +98,6 @@ pub fn check_trusted(found: &Path, user: u32) -> Result<(), UntrustedPath> {
                 mode,
             });
         }
-    }
-    // The file may be a link: its target and the target's directories must pass too.
-    let resolved = std::fs::canonicalize(&absolute).map_err(|source| UntrustedPath::Inspect {
-        found: found.to_path_buf(),
-        offender: absolute.clone(),
-        source,
-    })?;
-    if resolved != absolute {
-        return check_trusted(&resolved, user).map_err(|error| match error {
-            UntrustedPath::ForeignOwner {
-                offender,
-                owner,
-                user,
-                ..
-            } => UntrustedPath::ForeignOwner {
-                found: found.to_path_buf(),
-                offender,
-                owner,
-                user,
-            },
-            UntrustedPath::WritableByOthers { offender, mode, .. } => {
-                UntrustedPath::WritableByOthers {
-                    found: found.to_path_buf(),
-                    offender,
-                    mode,
-                }
-            }
-            inspect => inspect,
-        });
     }
     Ok(())
 }

@@ -11,7 +11,7 @@ use evgate_io::reader::UNBOUNDED_SENSOR;
 use evgate_io::{create, open_with_time_low_rule, DecodeReport, Evt3TimeLow, Format, OpenOptions};
 use serde::Serialize;
 
-use crate::info::{byte_progress, inspect, parse_sensor_size};
+use crate::info::{byte_progress, inspect};
 
 #[derive(Args)]
 pub struct ConvertArgs {
@@ -21,7 +21,7 @@ pub struct ConvertArgs {
     pub output: PathBuf,
     /// Sensor size WxH: required context for text inputs (otherwise the extent of the events is
     /// used) and old headers without geometry; overrides the input's size otherwise.
-    #[arg(long, value_parser = parse_sensor_size)]
+    #[arg(long, value_parser = evgate_io::header::parse_sensor_flag)]
     pub sensor: Option<SensorSize>,
     /// Print a JSON summary instead of text.
     #[arg(long)]

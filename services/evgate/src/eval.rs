@@ -49,7 +49,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub group: Option<String>,
     /// Sensor size WxH for event files whose header gives none (e.g. 640x480).
-    #[arg(long, value_parser = crate::info::parse_sensor_size)]
+    #[arg(long, value_parser = evgate_io::header::parse_sensor_flag)]
     pub sensor: Option<SensorSize>,
     /// ONNX model as NAME=PATH or PATH (named by its file stem), repeatable. The first is the
     /// model under test: its current mask feeds the no-forecast and linear baselines. Size,

@@ -22,15 +22,13 @@ pub struct InfoArgs {
     pub json: bool,
     /// Sensor size as WxH, for files whose header has none (text, old RAW/DAT); overrides the
     /// header otherwise.
-    #[arg(long, value_parser = parse_sensor_size)]
+    #[arg(long, value_parser = evgate_io::header::parse_sensor_flag)]
     pub sensor: Option<SensorSize>,
     /// EVT 3.0 only: how a TIME_LOW smaller than the previous one is read: `evt3` (the format's
     /// rule: a step back) or `carry-on-step-back` (adds 4096 µs, as expelliarmus does).
     #[arg(long, default_value = "evt3")]
     pub evt3_time_low: Evt3TimeLow,
 }
-
-pub use evgate_io::header::parse_sensor_flag as parse_sensor_size;
 
 /// Everything `info` reports; the JSON keys are these fields in kebab-case.
 #[derive(Serialize)]

@@ -51,7 +51,7 @@ pub struct RunArgs {
     input: Option<PathBuf>,
     /// Sensor size of --input as WIDTHxHEIGHT: required for files that give none (text), and
     /// overrides the file's otherwise.
-    #[arg(long, value_parser = crate::info::parse_sensor_size)]
+    #[arg(long, value_parser = evgate_io::header::parse_sensor_flag)]
     sensor: Option<evgate_core::SensorSize>,
     /// Scene of the simulated camera: boxes, floor, wall, table, fast, tabletop or driving.
     #[arg(long, default_value = "boxes")]

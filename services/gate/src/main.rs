@@ -256,7 +256,6 @@ fn run(args: &Args) -> anyhow::Result<GateSummary> {
         return Err(error);
     }
     let ended_by = match outcome {
-        _ if stopped_by_signal => "signal",
         WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => "signal",
         _ if reached_end => "end-of-stream",
         _ => "signal",

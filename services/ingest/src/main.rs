@@ -418,7 +418,6 @@ fn publish_end_of_stream(
         );
     }
     totals.record(&header, delivery.undelivered);
-    totals.end_of_stream_sent = delivery.undelivered == 0;
     Ok(())
 }
 
