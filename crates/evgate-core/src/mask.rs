@@ -160,7 +160,7 @@ impl BitMask {
         }
         // Comparisons in fixed blocks of 32, which the compiler turns into vector compares and
         // sign-bit moves, packed into words by a running writer: 640×480 × 9 planes took 4.3 ms
-        // per window bit by bit (BENCHMARKS.md, "Inference").
+        // per window bit by bit (`git show dd99da7:BENCHMARKS.md`, "Inference").
         let mut writer = BitWriter::new(&mut self.words);
         for row in logits.chunks(row_stride).take(usize::from(size.height)) {
             let mut blocks = row[..width].chunks_exact(32);

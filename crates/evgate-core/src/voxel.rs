@@ -305,7 +305,7 @@ fn non_zero_deviation(cell: f32, mean: f64) -> f64 {
 
 /// +1 for ON, −1 for OFF: 1.0 with the sign bit set for OFF. The arithmetic form
 /// `f32::from(on) * 2.0 - 1.0` was compiled into a branch on the polarity, which real and
-/// synthetic streams alike leave unpredictable (see BENCHMARKS.md, "Core kernels"); the sign
+/// synthetic streams alike leave unpredictable (`git show dd99da7:BENCHMARKS.md`, "Core kernels"); the sign
 /// bit form compiles to a `sete` and a table load.
 #[inline(always)]
 fn polarity_value(event: &Event) -> f32 {

@@ -407,7 +407,7 @@ fn configure_session(
         // The memory pattern pre-plans one block for every intermediate tensor of a run; with
         // the committed S model at 352×272 and 8 horizons that block kept evgate-infer at
         // 235 MiB resident against 152 MiB without it, at the same CPU time per call (the
-        // arena then reuses freed tensors' memory). See BENCHMARKS.md, "Pipeline".
+        // arena then reuses freed tensors' memory); `git show dd99da7:BENCHMARKS.md`, "Pipeline".
         .with_memory_pattern(false)?;
     if options.intra_threads > 0 {
         builder = builder.with_intra_threads(options.intra_threads)?;

@@ -13,7 +13,7 @@ is never blocked unless a convolution reads it. The cell is therefore rewritten 
 - h enters through a depthwise 1x1 convolution of weight 1 (exact), which makes it a blocked
   tensor that Mul and Add accept, and c - h is c plus a depthwise convolution of weight -1.
 
-Measured on the S export: models/MODEL_CARD.md, "CPU latency".
+Measured on the S export: `git show dd99da7:models/MODEL_CARD.md`, "CPU latency".
 """
 
 import torch

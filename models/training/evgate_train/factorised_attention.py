@@ -8,7 +8,7 @@ Only the horizon encoding differs between the copies, and it enters the query li
 
 so softmax(S + b_k) V = (E (w_k * V)) / (E w_k) with E = exp(S - max S) and w_k = exp(b_k - max b_k):
 one matrix product per head for all horizons, against K products and K softmaxes of the full
-score matrix (measured: models/MODEL_CARD.md, "CPU latency"). The weights are the module's
+score matrix (measured: `git show dd99da7:models/MODEL_CARD.md`, "CPU latency"). The weights are the module's
 own; only the order of the arithmetic changes.
 
 E and w_k are at most 1 with a 1 in every row, so the denominator cannot overflow; it

@@ -6,7 +6,7 @@ of 8 (AVX2) or 16 (AVX-512); with a channel count outside those blocks the convo
 back to a slower path, after a full copy for the concatenation. A convolution is linear in its
 input channels, so Conv(Concat(a, b), W) = Conv(a, W_a) + Conv(b, W_b): the large part then
 takes the fast path and the concatenation disappears. Measured on the S export at K = 8 with 2
-threads: 10-20 % less CPU time per call (models/MODEL_CARD.md, "CPU latency").
+threads: 10-20 % less CPU time per call (`git show dd99da7:models/MODEL_CARD.md`, "CPU latency").
 """
 
 import onnx
