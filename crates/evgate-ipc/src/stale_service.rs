@@ -26,7 +26,7 @@ use std::fs::Metadata;
 use std::io::ErrorKind;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use iceoryx2::config::Config;
 use iceoryx2::node::{NodeState, NodeView};
@@ -200,18 +200,29 @@ fn any_live_node_holds_tag(
     Ok(holds)
 }
 
-/// A dynamic config no one may read yet: its creator has not finished initialising it.
+/// A dynamic config of this user that no one may read yet: its creator has not finished
+/// initialising it. Other users' files are theirs to clean up, whatever their name.
 fn is_unfinished_dynamic_config(metadata: &Metadata) -> bool {
-    metadata.is_file() && metadata.permissions().mode() & 0o444 == 0
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let user = unsafe { libc::geteuid() };
+    metadata.is_file() && metadata.uid() == user && metadata.permissions().mode() & 0o444 == 0
 }
 
-fn changed_at(metadata: &Metadata) -> SystemTime {
-    UNIX_EPOCH + Duration::new(metadata.ctime().max(0) as u64, metadata.ctime_nsec() as u32)
+/// When the creation timeout of a file last changed as `metadata` says runs out, on the
+/// monotonic clock: its age is read once from the wall clock, so a clock step during the wait
+/// cannot shorten or stretch it.
+fn creation_deadline(metadata: &Metadata, creation_timeout: Duration) -> Instant {
+    let changed_at =
+        UNIX_EPOCH + Duration::new(metadata.ctime().max(0) as u64, metadata.ctime_nsec() as u32);
+    let age = SystemTime::now()
+        .duration_since(changed_at)
+        .unwrap_or(Duration::ZERO);
+    Instant::now() + creation_timeout.saturating_sub(age)
 }
 
-/// Removes the dynamic configs (of `config`'s prefix and suffix) that are still unreadable once
-/// the creation timeout has passed since their last change, waiting out that timeout for young
-/// ones; returns how many it removed.
+/// Removes the dynamic configs of this user (`config`'s prefix and suffix) that are still
+/// unreadable once the creation timeout has passed since their last change, waiting out that
+/// timeout for young ones; returns how many it removed.
 pub fn remove_unfinished_dynamic_configs(config: &Config) -> Result<usize, StaleServiceError> {
     let prefix = config.global.prefix.to_string();
     let suffix = config
@@ -243,7 +254,7 @@ pub fn remove_unfinished_dynamic_configs(config: &Config) -> Result<usize, Stale
         let Ok(Some(before)) = unfinished_metadata(&path) else {
             continue;
         };
-        let deadline = changed_at(&before) + creation_timeout;
+        let deadline = creation_deadline(&before, creation_timeout);
         if !matches!(stays_unfinished_until(&path, &before, deadline), Ok(true)) {
             continue;
         }
@@ -272,7 +283,7 @@ pub fn remove_unfinished_dynamic_configs(config: &Config) -> Result<usize, Stale
 fn stays_unfinished_until(
     path: &Path,
     before: &Metadata,
-    deadline: SystemTime,
+    deadline: Instant,
 ) -> std::io::Result<bool> {
     const POLL: Duration = Duration::from_millis(10);
     loop {
@@ -281,9 +292,9 @@ fn stays_unfinished_until(
             Some(now) if identity(&now) == identity(before) => {}
             _ => return Ok(false),
         }
-        match deadline.duration_since(SystemTime::now()) {
-            Ok(remaining) => std::thread::sleep(remaining.min(POLL)),
-            Err(_) => return Ok(true),
+        match deadline.checked_duration_since(Instant::now()) {
+            Some(remaining) if !remaining.is_zero() => std::thread::sleep(remaining.min(POLL)),
+            _ => return Ok(true),
         }
     }
 }

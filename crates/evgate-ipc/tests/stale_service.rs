@@ -159,3 +159,23 @@ fn an_empty_dynamic_config_nobody_may_read_is_removed_once_the_creation_timeout_
     );
     assert!(finished_kept, "a readable dynamic config was removed");
 }
+
+/// Issue 15: the scan of `/dev/shm` removed any unfinished iceoryx2 dynamic config, other
+/// users' included. Only root can give a file away, so elsewhere this test has nothing to try.
+#[test]
+fn another_users_unfinished_dynamic_config_is_left_alone() {
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    if unsafe { libc::geteuid() } != 0 {
+        eprintln!("skipped: only root can create a file owned by another user");
+        return;
+    }
+    let foreign = dynamic_config_path("foreign");
+    std::fs::write(&foreign, b"").unwrap();
+    set_mode(&foreign, 0o200);
+    std::os::unix::fs::chown(&foreign, Some(4242), None).unwrap();
+    // Old enough that its creation timeout has passed, as for an abandoned one of ours.
+    remove_unfinished_dynamic_configs(Config::global_config()).unwrap();
+    let kept = foreign.exists();
+    std::fs::remove_file(&foreign).unwrap();
+    assert!(kept, "another user's dynamic config was removed");
+}
