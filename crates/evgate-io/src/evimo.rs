@@ -9,6 +9,7 @@ use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, Receiver};
+use std::thread::JoinHandle;
 
 use evgate_core::{Event, SensorSize};
 
@@ -24,11 +25,23 @@ const RECORD_BYTES: usize = 32;
 /// Inflated blocks in flight between the helper thread and the decoder.
 const BLOCKS_IN_FLIGHT: usize = 4;
 
-/// Reads one zip member as a stream, inflated on a helper thread.
+/// Reads one zip member as a stream, inflated on a helper thread that ends with the stream.
 pub(crate) struct MemberStream {
     blocks: Receiver<std::io::Result<Vec<u8>>>,
     block: Vec<u8>,
     position: usize,
+    helper: Option<JoinHandle<()>>,
+}
+
+impl Drop for MemberStream {
+    /// Hangs up, so the helper's next send fails, and waits for it: a detached helper went on
+    /// inflating after its reader was gone (the `evimo_npz` fuzz target's leak report).
+    fn drop(&mut self) {
+        drop(std::mem::replace(&mut self.blocks, sync_channel(0).1));
+        if let Some(helper) = self.helper.take() {
+            let _ = helper.join();
+        }
+    }
 }
 
 impl Read for MemberStream {
@@ -63,7 +76,7 @@ pub(crate) fn open_member(path: &Path, member: &str) -> Result<Option<MemberStre
         return Ok(None);
     };
     let (sender, blocks) = sync_channel(BLOCKS_IN_FLIGHT);
-    std::thread::spawn(move || {
+    let helper = std::thread::spawn(move || {
         let mut entry = match archive.by_index(index) {
             Ok(entry) => entry,
             Err(e) => {
@@ -92,6 +105,7 @@ pub(crate) fn open_member(path: &Path, member: &str) -> Result<Option<MemberStre
         blocks,
         block: Vec::new(),
         position: 0,
+        helper: Some(helper),
     }))
 }
 
