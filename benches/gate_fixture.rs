@@ -1,18 +1,15 @@
 //! What the shared-memory benches (ipc_latency, throughput) feed the gate: random event
-//! batches on one sensor and forecasts over it, and the command-line and report handling they
-//! share.
-
-use std::path::Path;
+//! batches on one sensor and forecasts over it.
 
 use evgate_core::{words_for, BitMask, Event, SensorSize};
 use evgate_ipc::ForecastHeader;
 use rand::{Rng, SeedableRng};
 
+pub use evgate_benches::{flag_value, write_report, BenchResult};
+
 pub const SENSOR: SensorSize = SensorSize::new(346, 260);
 pub const REFERENCE_US: i64 = 1_000_000;
 pub const HORIZONS_US: [i64; 2] = [25_000, 50_000];
-
-pub type BenchResult<T> = Result<T, Box<dyn std::error::Error>>;
 
 /// `size` random events on the sensor, all inside the forecast's horizons, in time order.
 pub fn random_batch(size: usize, seed: u64) -> Vec<Event> {
@@ -55,24 +52,4 @@ pub fn forecast(mask: &BitMask) -> (ForecastHeader, Vec<u64>) {
     };
     header.horizons_us[..HORIZONS_US.len()].copy_from_slice(&HORIZONS_US);
     (header, mask.as_words().repeat(1 + HORIZONS_US.len()))
-}
-
-/// The argument after `flag` on this process's command line.
-pub fn flag_value(flag: &str) -> Option<String> {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == flag)
-        .and_then(|i| args.get(i + 1))
-        .cloned()
-}
-
-/// Writes `report` to `out` (creating its folder), prints it, and says where it went.
-pub fn write_report(out: &Path, report: &serde_json::Value) -> BenchResult<()> {
-    if let Some(parent) = out.parent() {
-        std::fs::create_dir_all(parent)?;
-    }
-    std::fs::write(out, serde_json::to_string_pretty(report)?)?;
-    println!("{}", serde_json::to_string_pretty(report)?);
-    eprintln!("written to {}", out.display());
-    Ok(())
 }

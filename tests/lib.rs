@@ -275,6 +275,16 @@ impl Process {
     /// Starts `program` with `args`; stdout is captured (the JSON summary), stderr is echoed and
     /// its tail kept for failure messages.
     pub fn start(program: &Path, args: &[&str]) -> Result<Self, HarnessError> {
+        Self::start_with(program, args, |_| {})
+    }
+
+    /// As [`Process::start`], after `adjust` has set up the command (working directory,
+    /// environment).
+    pub fn start_with(
+        program: &Path,
+        args: &[&str],
+        adjust: impl FnOnce(&mut Command),
+    ) -> Result<Self, HarnessError> {
         let name = program
             .file_name()
             .map(|name| name.to_string_lossy().into_owned())
@@ -292,6 +302,7 @@ impl Process {
         if std::env::var_os("RUST_LIB_BACKTRACE").is_none() {
             command.env("RUST_LIB_BACKTRACE", "0");
         }
+        adjust(&mut command);
         let mut child = command.spawn().map_err(|source| HarnessError::Spawn {
             program: program.display().to_string(),
             source,

@@ -7,6 +7,9 @@ gate publishes, and reads every batch in place (a ctypes array laid over the sha
 Prints one JSON object with what it received when it stops: at the end-of-stream batch,
 after --max-batches batches, or after --timeout-s seconds without any batch.
 
+The node uses evgate's own iceoryx2 settings (`evgate_iceoryx_config`), not iceoryx2's defaults:
+a consumer on the defaults finds no evgate service.
+
 Setup: examples/python/setup.sh (installs the iceoryx2 bindings of the version the Rust crates
 use; the record layouts below must match crates/evgate-ipc and crates/evgate-core).
 """
@@ -14,6 +17,8 @@ use; the record layouts below must match crates/evgate-ipc and crates/evgate-cor
 import argparse
 import ctypes
 import json
+import os
+import stat
 import sys
 import time
 
@@ -64,6 +69,30 @@ assert ctypes.sizeof(Event) == 16 and ctypes.alignment(Event) == 8
 assert ctypes.sizeof(BatchHeader) == 64 and ctypes.alignment(BatchHeader) == 8
 
 
+def evgate_iceoryx_config():
+    """evgate's iceoryx2 settings (crates/evgate-ipc/src/iceoryx_config.rs): the per-user root
+    `$XDG_RUNTIME_DIR/evgate` (else `/tmp/evgate-<uid>`) and the file prefix `evgate<uid>_`.
+    Whoever starts first creates the root, mode 0700; it must be this user's and closed to
+    others, or the pipeline behind it may be another user's."""
+    uid = os.geteuid()
+    runtime = os.environ.get("XDG_RUNTIME_DIR", "")
+    root = os.path.join(runtime, "evgate") if os.path.isabs(runtime) else f"/tmp/evgate-{uid}"
+    try:
+        os.mkdir(root, 0o700)
+    except FileExistsError:
+        pass
+    info = os.lstat(root)
+    if not stat.S_ISDIR(info.st_mode) or info.st_uid != uid or info.st_mode & 0o077:
+        raise SystemExit(
+            f"refusing the iceoryx2 root {root}: it must be a directory of user {uid} with mode 0700 "
+            f"(found owner {info.st_uid}, mode {stat.S_IMODE(info.st_mode):04o})"
+        )
+    config = iox2.config.default()
+    config.global_cfg.root_path = iox2.Path.new(root + "/")
+    config.global_cfg.prefix = iox2.FileName.new(f"evgate{uid}_")
+    return config
+
+
 def open_with_retry(open_service, what: str, deadline: float):
     """The gate creates its services when it starts; wait for them instead of failing."""
     while True:
@@ -84,7 +113,7 @@ def main() -> int:
     args = parser.parse_args()
 
     iox2.set_log_level_from_env_or(iox2.LogLevel.Warn)
-    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    node = iox2.NodeBuilder.new().config(evgate_iceoryx_config()).create(iox2.ServiceType.Ipc)
     name = iox2.ServiceName.new(f"{args.domain}/{args.camera}/kept")
     deadline = time.monotonic() + args.timeout_s
     service = open_with_retry(

@@ -4,11 +4,12 @@
 use std::time::Duration;
 
 use evgate_core::{BitMask, Event, SensorSize};
-use evgate_e2e::{start_service, u64_at, unique_names, wait_until, Process};
+use evgate_e2e::{binary, start_service, u64_at, unique_names, wait_until, Process};
 use evgate_ipc::{
     create_node, BatchFlags, BatchHeader, ForecastHeader, LatestSubscriber, PipelineNames,
     PipelineStats, Qos, SlicePublisher, SliceSubscriber, Stream,
 };
+use iceoryx2::prelude::SemanticString;
 
 const SENSOR: SensorSize = SensorSize::new(32, 16);
 const TIMEOUT: Duration = Duration::from_secs(60);
@@ -256,4 +257,71 @@ fn gate_falls_back_to_its_policy_when_forecasts_stop_and_resumes_when_they_retur
     let summary = gate.summary(TIMEOUT).unwrap();
     assert_eq!(summary["balanced"], true);
     assert_eq!(u64_at(&summary, "/stats/forecasts-received"), 2);
+}
+
+/// A `config/iceoryx2.toml` in the working directory, which iceoryx2 on its defaults loads first,
+/// must not move a service to a root another user chose: evgate's services use evgate's own
+/// configuration (per-user root), say nothing of config files, and still meet their peers.
+#[test]
+fn services_ignore_an_iceoryx2_config_planted_in_their_working_directory() {
+    let planted = tempfile::tempdir().unwrap();
+    let decoy_root = planted.path().join("decoy-root");
+    let config_file = planted.path().join("config/iceoryx2.toml");
+    std::fs::create_dir(config_file.parent().unwrap()).unwrap();
+    std::fs::write(
+        &config_file,
+        format!(
+            "[global]\nroot-path = \"{}/\"\nprefix = \"planted_\"\n",
+            decoy_root.display()
+        ),
+    )
+    .unwrap();
+    // The plant is one iceoryx2 itself would honour.
+    let honoured = iceoryx2::config::Config::from_file(
+        &iceoryx2::prelude::FilePath::new(config_file.to_str().unwrap().as_bytes()).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(honoured.global.prefix.to_string(), "planted_");
+
+    let names = unique_names("planted-config");
+    let node = create_node("planted-config-harness").unwrap();
+    let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats).unwrap();
+    let stderr_path = planted.path().join("gate.stderr");
+    let stderr = std::fs::File::create(&stderr_path).unwrap();
+    let mut gate = Process::start_with(
+        &binary("evgate-gate").unwrap(),
+        &[
+            "--domain",
+            &names.domain,
+            "--camera",
+            &names.camera,
+            "--stats-interval-ms",
+            "10",
+        ],
+        |command| {
+            command
+                .current_dir(planted.path())
+                .env("RUST_LOG", "info")
+                .stderr(stderr);
+        },
+    )
+    .unwrap();
+    wait_until("the gate's stats in evgate's own root", TIMEOUT, || {
+        stats.latest().unwrap().is_some()
+    })
+    .unwrap();
+    gate.signal(libc::SIGTERM);
+    let (status, _) = gate.wait(TIMEOUT).unwrap();
+    assert!(status.success(), "gate: {status}");
+
+    assert!(
+        !decoy_root.exists(),
+        "the gate created the planted root {}",
+        decoy_root.display()
+    );
+    let log = std::fs::read_to_string(&stderr_path).unwrap();
+    assert!(
+        !log.to_lowercase().contains("config file"),
+        "the gate looked for iceoryx2 config files:\n{log}"
+    );
 }

@@ -16,6 +16,7 @@
 pub mod batch;
 pub mod clock;
 pub mod forecast;
+pub mod iceoryx_config;
 pub mod logging;
 pub mod names;
 pub mod node;
@@ -27,6 +28,7 @@ pub mod stats;
 
 pub use batch::{BatchError, BatchFlags, BatchHeader};
 pub use forecast::{ForecastError, ForecastHeader, MAX_HORIZONS};
+pub use iceoryx_config::{evgate_config, SharedMemoryRootError};
 pub use logging::init_service_logging;
 pub use names::{NameError, PipelineNames, Stream};
 pub use node::{create_node, NodeError};

@@ -1,9 +1,9 @@
 //! Creating the iceoryx2 node of a process.
 
-use iceoryx2::config::Config;
 use iceoryx2::prelude::{Node, NodeBuilder, NodeName};
 use tracing::{debug, info};
 
+use crate::iceoryx_config::{evgate_config, SharedMemoryRootError};
 use crate::stale_service::{remove_unfinished_dynamic_configs, StaleServiceError};
 use crate::Service;
 
@@ -15,10 +15,13 @@ pub enum NodeError {
     #[error("cannot create iceoryx2 node {name:?}: {reason}")]
     Create { name: String, reason: String },
     #[error(transparent)]
+    Root(#[from] SharedMemoryRootError),
+    #[error(transparent)]
     StaleService(#[from] StaleServiceError),
 }
 
-/// Creates the node of this process and removes the shared-memory resources left by processes
+/// Creates the node of this process on evgate's own iceoryx2 configuration
+/// ([`crate::iceoryx_config`]) and removes the shared-memory resources left by processes
 /// that died without cleaning up (crashed or killed), so a restarted service can reopen its
 /// ports instead of finding them occupied.
 pub fn create_node(name: &str) -> Result<Node<Service>, NodeError> {
@@ -26,10 +29,12 @@ pub fn create_node(name: &str) -> Result<Node<Service>, NodeError> {
         name: name.to_owned(),
         reason: format!("{error:?}"),
     })?;
+    let config = evgate_config()?;
     // Node creation cleans dead nodes, which would wait forever on an empty unfinished one.
-    remove_unfinished_dynamic_configs(Config::global_config())?;
+    remove_unfinished_dynamic_configs(config)?;
     let node = NodeBuilder::new()
         .name(&node_name)
+        .config(config)
         .create::<Service>()
         .map_err(|error| NodeError::Create {
             name: name.to_owned(),

@@ -220,7 +220,9 @@ fn creation_deadline(metadata: &Metadata, creation_timeout: Duration) -> Instant
     Instant::now() + creation_timeout.saturating_sub(age)
 }
 
-/// Removes the dynamic configs of this user (`config`'s prefix and suffix) that are still
+/// Removes the dynamic configs of this user (`config`'s prefix and suffix: on evgate's own
+/// configuration the prefix is this user's `evgate<uid>_`, so no other application's file is
+/// looked at) that are still
 /// unreadable once the creation timeout has passed since their last change, waiting out that
 /// timeout for young ones; returns how many it removed.
 pub fn remove_unfinished_dynamic_configs(config: &Config) -> Result<usize, StaleServiceError> {

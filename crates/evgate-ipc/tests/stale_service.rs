@@ -7,9 +7,9 @@ use std::path::PathBuf;
 
 use evgate_ipc::stale_service::remove_unfinished_dynamic_configs;
 use evgate_ipc::{
-    create_node, LatestPublisher, LatestSubscriber, PipelineNames, PipelineStats, Stream,
+    create_node, evgate_config, LatestPublisher, LatestSubscriber, PipelineNames, PipelineStats,
+    Stream,
 };
-use iceoryx2::config::Config;
 use iceoryx2::service::builder::publish_subscribe::{
     PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
 };
@@ -29,7 +29,7 @@ fn unique_names(test: &str) -> PipelineNames {
 /// Finds the static config of the publish-subscribe service `service` by its content, in the
 /// directory iceoryx2 reports, so the test does not share the path computation it checks.
 fn publish_subscribe_static_config(service: &str) -> PathBuf {
-    let directory = Config::global_config().global.service_dir().to_string();
+    let directory = evgate_config().unwrap().global.service_dir().to_string();
     let needle = format!("service_name = \"{service}\"");
     std::fs::read_dir(&directory)
         .unwrap()
@@ -128,7 +128,7 @@ fn a_stream_a_live_node_may_still_be_creating_is_left_alone() {
 
 /// A shared-memory object named like an iceoryx2 dynamic config of this test.
 fn dynamic_config_path(test: &str) -> PathBuf {
-    let global = &Config::global_config().global;
+    let global = &evgate_config().unwrap().global;
     PathBuf::from("/dev/shm").join(format!(
         "{}evgate-test-{test}-{}{}",
         global.prefix,
@@ -149,7 +149,7 @@ fn an_empty_dynamic_config_nobody_may_read_is_removed_once_the_creation_timeout_
     set_mode(&finished, 0o600);
 
     // Node creations of the other tests of this binary may remove it first.
-    remove_unfinished_dynamic_configs(Config::global_config()).unwrap();
+    remove_unfinished_dynamic_configs(evgate_config().unwrap()).unwrap();
     let finished_kept = finished.exists();
     std::fs::remove_file(&finished).unwrap();
     assert!(
@@ -174,7 +174,7 @@ fn another_users_unfinished_dynamic_config_is_left_alone() {
     set_mode(&foreign, 0o200);
     std::os::unix::fs::chown(&foreign, Some(4242), None).unwrap();
     // Old enough that its creation timeout has passed, as for an abandoned one of ours.
-    remove_unfinished_dynamic_configs(Config::global_config()).unwrap();
+    remove_unfinished_dynamic_configs(evgate_config().unwrap()).unwrap();
     let kept = foreign.exists();
     std::fs::remove_file(&foreign).unwrap();
     assert!(kept, "another user's dynamic config was removed");
