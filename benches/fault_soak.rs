@@ -3,6 +3,7 @@
 //! restarted or SIGSTOPped for up to 2 s and continued, with a random pause of 0.5-3 s between
 //! faults.
 //!
+//! A service that ends by itself meanwhile is a failure (it is recorded and restarted).
 //! Throughout, the gate's stats are read every few milliseconds and each snapshot must balance
 //! (`input = kept + suppressed + unjudged passed + unjudged dropped + dropped`). At the end every
 //! service runs again, the ingest is stopped with SIGTERM (it sends its end-of-stream marker),
@@ -35,6 +36,8 @@ struct Service {
     process: Process,
     kills: u64,
     stops: u64,
+    /// Exit statuses of the times the service ended without being killed.
+    unexpected_exits: Vec<String>,
 }
 
 impl Service {
@@ -46,6 +49,7 @@ impl Service {
             process,
             kills: 0,
             stops: 0,
+            unexpected_exits: Vec::new(),
         })
     }
 
@@ -54,11 +58,14 @@ impl Service {
         Ok(())
     }
 
-    /// Restarts the service if it is not running (it exited or was killed).
+    /// Records and restarts a service that ended by itself: none should while its stream runs.
     fn ensure_running(&mut self, names: &PipelineNames) -> BenchResult<()> {
-        self.process.signal(libc::SIGCONT);
-        if !self.process.is_running() {
-            eprintln!("soak: {} had exited; restarting it", self.package);
+        if let Some(status) = self.process.try_status() {
+            eprintln!(
+                "\nsoak: {} ended by itself ({status}); restarting it",
+                self.package
+            );
+            self.unexpected_exits.push(status.to_string());
             self.restart(names)?;
         }
         Ok(())
@@ -86,6 +93,10 @@ impl StatsWatch {
     fn poll(&mut self, stats: &LatestSubscriber<PipelineStats>) -> BenchResult<()> {
         if let Some(snapshot) = stats.latest()? {
             self.snapshots += 1;
+            // A gate publishes stats before its first batch too; they belong to no stream.
+            if snapshot.input_batches == 0 {
+                return Ok(());
+            }
             if !snapshot.is_balanced() {
                 self.unbalanced += 1;
                 eprintln!("soak: UNBALANCED stats snapshot {snapshot:?}");
@@ -162,8 +173,8 @@ fn main() -> BenchResult<()> {
     let names = unique_names("soak");
     let node = create_node("fault-soak")?;
     let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats)?;
-    let input = input.display().to_string();
-    let model = model.display().to_string();
+    let input = input.canonicalize()?.display().to_string();
+    let model = model.canonicalize()?.display().to_string();
     let mut services = [
         Service::start(
             "evgate-gate",
@@ -251,6 +262,7 @@ fn main() -> BenchResult<()> {
     let same_stream =
         u64_at(&gate_summary, "/stats/stream-id") == u64_at(&ingest_summary, "/stream-id");
     let unaccounted = published as i128 - joined as i128 - fates as i128;
+    let unexpected_exits: usize = services.iter().map(|s| s.unexpected_exits.len()).sum();
     let report = json!({
         "bench": "fault_soak",
         "seconds": seconds,
@@ -260,6 +272,7 @@ fn main() -> BenchResult<()> {
         "faults": faults,
         "per-service": services.iter().map(|s| json!({
             "service": s.package, "sigkill-and-restart": s.kills, "sigstop-and-continue": s.stops,
+            "unexpected-exits": s.unexpected_exits,
         })).collect::<Vec<_>>(),
         "stats-snapshots": watch.snapshots,
         "unbalanced-snapshots": watch.unbalanced,
@@ -272,11 +285,11 @@ fn main() -> BenchResult<()> {
             "kept+suppressed+unjudged+dropped": fates,
             "unaccounted": unaccounted,
         },
-        "passed": same_stream && unaccounted == 0 && watch.unbalanced == 0,
+        "passed": same_stream && unaccounted == 0 && watch.unbalanced == 0 && unexpected_exits == 0,
     });
     write_report(&out, &report)?;
     if report["passed"] != true {
-        return Err("fault soak: events unaccounted for (see the report)".into());
+        return Err("fault soak: events unaccounted for or services ended (see the report)".into());
     }
     Ok(())
 }

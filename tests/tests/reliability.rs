@@ -256,3 +256,56 @@ fn the_gate_ends_on_sigterm_under_a_flood() {
     assert_eq!(summary["ended-by"], "signal");
     assert_eq!(summary["balanced"], true);
 }
+
+/// The fault soak's finding: SIGCONT after a SIGSTOP (job control, a debugger, a supervisor
+/// pausing a process) cut a service's wait short, and every service took that for SIGINT or
+/// SIGTERM and ended the stream in the middle. Paused and continued again and again, the ingest,
+/// infer and gate must carry the whole stream to its end.
+#[test]
+fn services_paused_and_continued_carry_the_whole_stream() {
+    let names = unique_names("sigcont");
+    let node = create_node("sigcont-test").unwrap();
+    let probe = events_probe(&node, &names);
+    let model = evgate_e2e::test_model_path();
+    let mut gate = start_gate(&names, &["--exit-at-end-of-stream"]);
+    let mut infer = start_service(
+        "evgate-infer",
+        &names,
+        &[
+            "--model",
+            model.to_str().unwrap(),
+            "--exit-at-end",
+            "--stats-interval-s",
+            "0",
+        ],
+    )
+    .unwrap();
+    wait_until("the gate and infer subscribing", TIMEOUT, || {
+        probe.subscriber_count() == 2
+    })
+    .unwrap();
+    // Paced at real time, so the stream is still running while the services are paused.
+    let mut ingest = start_service(
+        "evgate-ingest",
+        &names,
+        &["--json", "--sim-duration-s", "1.5"],
+    )
+    .unwrap();
+    for round in 0..4 {
+        for service in [&mut ingest, &mut infer, &mut gate] {
+            service.signal(libc::SIGSTOP);
+            std::thread::sleep(Duration::from_millis(20));
+            service.signal(libc::SIGCONT);
+        }
+        std::thread::sleep(Duration::from_millis(50 + 20 * round));
+    }
+    let ingest_summary = ingest.summary(TIMEOUT).unwrap();
+    let gate_summary = gate.summary(TIMEOUT).unwrap();
+    let infer_summary = infer.summary(TIMEOUT).unwrap();
+    assert_eq!(ingest_summary["ended-by"], "end-of-stream");
+    assert_eq!(gate_summary["ended-by"], "end-of-stream");
+    let published = u64_at(&ingest_summary, "/events-published");
+    assert_eq!(u64_at(&gate_summary, "/stats/input-events"), published);
+    assert_eq!(u64_at(&infer_summary, "/events-received"), published);
+    assert_eq!(gate_summary["balanced"], true);
+}

@@ -25,6 +25,7 @@ pub mod qos;
 pub mod slice_writer;
 pub mod stale_service;
 pub mod stats;
+pub mod stop_request;
 
 pub use batch::{BatchError, BatchFlags, BatchHeader};
 pub use forecast::{ForecastError, ForecastHeader, MAX_HORIZONS};
@@ -39,6 +40,7 @@ pub use ports::{
 pub use qos::{Overflow, Qos};
 pub use slice_writer::SliceWriter;
 pub use stats::PipelineStats;
+pub use stop_request::{run_until_stopped, stop_requested};
 
 /// The iceoryx2 service flavour every evgate process uses: inter-process shared memory.
 pub type Service = iceoryx2::service::ipc::Service;

@@ -380,7 +380,8 @@ where
                 return Ok(delivery);
             }
             node.try_cleanup_dead_nodes();
-            if Instant::now() >= deadline || node.wait(Duration::from_millis(10)).is_err() {
+            if Instant::now() >= deadline || crate::stop_requested(node, Duration::from_millis(10))
+            {
                 return Ok(delivery);
             }
         }

@@ -280,8 +280,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .context("status line template")?,
     );
 
-    let outcome = waitset
-        .wait_and_process(|attachment: WaitSetAttachmentId<evgate_ipc::Service>| {
+    let outcome = evgate_ipc::run_until_stopped(
+        &waitset,
+        |attachment: WaitSetAttachmentId<evgate_ipc::Service>| {
             let step = (|| -> anyhow::Result<bool> {
                 if attachment.has_event_from(&labels_guard) {
                     labels.clear_wakeups();
@@ -333,13 +334,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                     CallbackProgression::Stop
                 }
             }
-        })
-        .context("waiting on the iceoryx2 waitset failed")?;
+        },
+    )
+    .context("waiting on the iceoryx2 waitset failed")?;
     status.finish_and_clear();
-    if matches!(
-        outcome,
-        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
-    ) {
+    if outcome == WaitSetRunResult::TerminationRequest {
         ended_by = "signal";
     }
     if failure.is_some() {

@@ -245,8 +245,7 @@ fn run(args: &Args) -> anyhow::Result<GateSummary> {
             }
         }
     };
-    let outcome = waitset
-        .wait_and_process(on_wakeup)
+    let outcome = evgate_ipc::run_until_stopped(&waitset, on_wakeup)
         .context("waiting on the iceoryx2 waitset failed")?;
     drop(events_guard);
     drop(forecast_guard);
@@ -256,7 +255,7 @@ fn run(args: &Args) -> anyhow::Result<GateSummary> {
         return Err(error);
     }
     let ended_by = match outcome {
-        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => "signal",
+        WaitSetRunResult::TerminationRequest => "signal",
         _ if reached_end => "end-of-stream",
         _ => "signal",
     };
@@ -328,7 +327,9 @@ impl Gate {
         let mut batches = 0u32;
         while let Some(sample) = events.receive()? {
             batches = batches.wrapping_add(1);
-            if batches.is_multiple_of(SIGNAL_CHECK_BATCHES) && node.wait(Duration::ZERO).is_err() {
+            if batches.is_multiple_of(SIGNAL_CHECK_BATCHES)
+                && evgate_ipc::stop_requested(node, Duration::ZERO)
+            {
                 return Ok(Drained::Signal);
             }
             // A forecast that arrived meanwhile judges this batch already.

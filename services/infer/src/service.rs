@@ -29,8 +29,8 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
     let node = create_node("evgate-infer")?;
     // iceoryx2 installs its SIGINT/SIGTERM handlers on the first wait; doing it now, before the
     // model loads, turns an early Ctrl-C into a clean stop instead of the default kill.
-    if let Err(signal) = node.wait(Duration::ZERO) {
-        bail!("stopped by {signal:?} before starting");
+    if evgate_ipc::stop_requested(&node, Duration::ZERO) {
+        bail!("stopped by SIGINT or SIGTERM before starting");
     }
     let options = RuntimeOptions {
         provider: args.provider,
@@ -121,8 +121,8 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
     let cycle = Duration::from_micros(args.cycle_us.max(1));
 
     let outcome = loop {
-        if let Err(signal) = node.wait(cycle) {
-            info!(?signal, "stopping");
+        if evgate_ipc::stop_requested(&node, cycle) {
+            info!("stopping on SIGINT or SIGTERM");
             break Ok(());
         }
         if let Err(failure) = state.receive_batches(&events, &mut assembler, &slot) {

@@ -272,7 +272,7 @@ fn run(args: &Args) -> anyhow::Result<IngestSummary> {
         } else {
             pacer.wait_before(batch.t_end_us, Instant::now())
         };
-        if node.wait(wait).is_err() {
+        if evgate_ipc::stop_requested(&node, wait) {
             ended_by = "signal";
             break;
         }
@@ -441,7 +441,7 @@ fn wait_for_subscribers(
             );
             return Ok(true);
         }
-        if node.wait(Duration::from_millis(10)).is_err() {
+        if evgate_ipc::stop_requested(node, Duration::from_millis(10)) {
             return Ok(false);
         }
     }
@@ -457,7 +457,7 @@ fn linger_until_subscribers_leave(
 ) {
     let deadline = Instant::now() + linger;
     while events.subscriber_count() > 0 && Instant::now() < deadline {
-        if node.wait(Duration::from_millis(5)).is_err() {
+        if evgate_ipc::stop_requested(node, Duration::from_millis(5)) {
             return;
         }
     }
