@@ -1,11 +1,18 @@
-//! The OMS baseline (retina-inspired object motion sensitivity, Clerico et al.): an
-//! event-presence frame is filtered by a small Gaussian centre and a wider Gaussian surround;
-//! where the centre's activity exceeds its surround's the pixel is "object motion". The
-//! difference is min–max normalised over the frame and thresholded, so the threshold is a share
-//! of the frame's range (0.96 keeps only the strongest 4 %).
+//! The OMS baseline (retina-inspired object motion sensitivity, Clerico et al.), as the
+//! authors' code computes it (soykilian/oms_generation: `gaussian_filter`, `apply_convolution`
+//! and `neuro_activation_function`, with the EVIMO setting of its `main.ipynb`):
 //!
-//! Kernels are square, separable, truncated at the radius with σ = radius / 2 and normalised to
-//! sum 1, so centre and surround are weighted local averages of event presence.
+//! * the frame is the window's event presence (1 where a pixel fired, either polarity);
+//! * centre and surround are 2-D Gaussian kernels of `2r + 1` taps per side sampled on [-1, 1]
+//!   with σ = 1 there (so σ is `r` pixels and the kernel is cut at one σ), scaled by
+//!   1 / (2π) and *not* normalised: the surround weighs about 3.5 times the centre;
+//! * each is convolved with zero padding ("same"), the response is |centre − surround|, then
+//!   `(response − min) / max` over the frame (the reference divides by the maximum, not the
+//!   range), and pixels at or above the threshold are flagged.
+//!
+//! Where events are dense the surround outweighs the centre, so OMS flags the densest patches of
+//! the window; an isolated event gives almost no response. A worked example computed by the
+//! reference code is a test (`tests/oms_reference.rs`).
 
 use evgate_core::{Event, SensorSize};
 use serde::{Deserialize, Serialize};
@@ -54,31 +61,37 @@ pub fn event_presence(events: &[Event], size: SensorSize) -> Vec<bool> {
     presence
 }
 
-/// Centre − surround response normalised to [0, 1] over the frame (all zeros for a flat frame).
+/// |centre − surround| divided by its frame maximum after subtracting its minimum, as the
+/// reference normalises it (all zeros for a flat frame, where the reference divides by zero).
 pub fn normalised_response(
     presence: &[bool],
     size: SensorSize,
     centre_radius: u32,
     surround_radius: u32,
 ) -> Vec<f32> {
-    let frame: Vec<f32> = presence.iter().map(|&p| p as u8 as f32).collect();
+    let frame: Vec<f64> = presence.iter().map(|&p| p as u8 as f64).collect();
     let centre = gaussian_blur(&frame, size, centre_radius);
     let surround = gaussian_blur(&frame, size, surround_radius);
-    let mut response: Vec<f32> = centre.iter().zip(&surround).map(|(c, s)| c - s).collect();
+    let response: Vec<f64> = centre
+        .iter()
+        .zip(&surround)
+        .map(|(c, s)| (c - s).abs())
+        .collect();
     let (low, high) = response
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
             (lo.min(v), hi.max(v))
         });
-    let range = high - low;
-    for value in &mut response {
-        *value = if range > 0.0 {
-            (*value - low) / range
-        } else {
-            0.0
-        };
-    }
     response
+        .iter()
+        .map(|&value| {
+            if high > 0.0 {
+                ((value - low) / high) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 /// The OMS mask of a normalised response.
@@ -101,28 +114,31 @@ pub fn oms_mask(events: &[Event], size: SensorSize, parameters: &OmsParameters) 
     threshold_response(&response, parameters.threshold)
 }
 
-fn gaussian_kernel(radius: u32) -> Vec<f32> {
-    let sigma = (radius as f32 / 2.0).max(0.5);
-    let weights: Vec<f32> = (-(radius as i32)..=radius as i32)
-        .map(|d| (-(d * d) as f32 / (2.0 * sigma * sigma)).exp())
-        .collect();
-    let total: f32 = weights.iter().sum();
-    weights.into_iter().map(|w| w / total).collect()
+/// One axis of the reference's 2-D kernel: `exp(-u² / 2)` at `2r + 1` points evenly spaced on
+/// [-1, 1], times 1 / sqrt(2π), so the outer product of two is the reference's kernel.
+fn gaussian_axis(radius: u32) -> Vec<f64> {
+    let radius = radius.max(1) as i64;
+    (-radius..=radius)
+        .map(|d| {
+            let u = d as f64 / radius as f64;
+            (-u * u / 2.0).exp() / (2.0 * std::f64::consts::PI).sqrt()
+        })
+        .collect()
 }
 
-/// Separable blur with zeros outside the frame.
-fn gaussian_blur(frame: &[f32], size: SensorSize, radius: u32) -> Vec<f32> {
-    let kernel = gaussian_kernel(radius);
+/// The 2-D Gaussian of the reference applied as two separable passes, zeros outside the frame.
+fn gaussian_blur(frame: &[f64], size: SensorSize, radius: u32) -> Vec<f64> {
+    let kernel = gaussian_axis(radius);
     let rows_done = blur_along(frame, size, &kernel, (1, 0));
     blur_along(&rows_done, size, &kernel, (0, 1))
 }
 
 /// One pass of the separable blur: each pixel becomes the `kernel`-weighted sum of the pixels
 /// centred on it along `step` (x, y); pixels outside the frame count as zero.
-fn blur_along(frame: &[f32], size: SensorSize, kernel: &[f32], step: (i64, i64)) -> Vec<f32> {
+fn blur_along(frame: &[f64], size: SensorSize, kernel: &[f64], step: (i64, i64)) -> Vec<f64> {
     let (width, height) = (size.width as i64, size.height as i64);
     let r = (kernel.len() / 2) as i64;
-    let mut blurred = vec![0.0f32; frame.len()];
+    let mut blurred = vec![0.0f64; frame.len()];
     for y in 0..height {
         for x in 0..width {
             let mut sum = 0.0;
@@ -144,30 +160,43 @@ mod tests {
     use super::*;
 
     #[test]
-    fn kernels_sum_to_one_and_peak_in_the_middle() {
+    fn the_kernel_is_the_reference_gaussian_on_minus_one_to_one() {
         for radius in [1, 2, 4] {
-            let kernel = gaussian_kernel(radius);
-            assert_eq!(kernel.len(), 2 * radius as usize + 1);
-            assert!((kernel.iter().sum::<f32>() - 1.0).abs() < 1e-6);
-            assert!(kernel[radius as usize] > kernel[0]);
+            let axis = gaussian_axis(radius);
+            assert_eq!(axis.len(), 2 * radius as usize + 1);
+            // The 2-D centre tap is 1 / (2π); the corner tap exp(-1) / (2π).
+            let tau = 2.0 * std::f64::consts::PI;
+            let centre = axis[radius as usize] * axis[radius as usize];
+            assert!((centre - 1.0 / tau).abs() < 1e-12);
+            assert!((axis[0] * axis[0] - (-1.0f64).exp() / tau).abs() < 1e-12);
         }
     }
 
     #[test]
-    fn isolated_blob_stands_out_of_a_uniform_field_edge() {
-        // A 3×3 blob of events in an otherwise empty 21×21 frame: the blob centre has the
-        // strongest centre-over-surround excess, an empty corner has none.
-        let size = SensorSize::new(21, 21);
-        let events: Vec<Event> = (9..12)
-            .flat_map(|y| (9..12).map(move |x| Event::new(0, x, y, true)))
+    fn a_solid_patch_responds_at_its_corners_and_a_lone_event_hardly_at_all() {
+        // A solid 5×5 patch and one lone event in an empty 31×21 frame. Inside the patch the
+        // centre is full and the surround partly so; the difference peaks at the patch's corners
+        // (what the reference gives for this frame), while the lone event stays near zero.
+        let size = SensorSize::new(31, 21);
+        let mut events: Vec<Event> = (8..13)
+            .flat_map(|y| (6..11).map(move |x| Event::new(0, x, y, true)))
             .collect();
+        events.push(Event::new(0, 25, 10, true));
         let presence = event_presence(&events, size);
-        let response = normalised_response(&presence, size, 1, 4);
-        assert_eq!(response[size.index(10, 10)], 1.0);
+        let response = normalised_response(&presence, size, 2, 4);
+        for (x, y) in [(6, 8), (10, 8), (6, 12), (10, 12)] {
+            assert_eq!(response[size.index(x, y)], 1.0, "corner ({x}, {y})");
+        }
+        assert!(response[size.index(25, 10)] < 0.05);
         let mask = threshold_response(&response, 0.9);
-        assert!(mask[size.index(10, 10)]);
-        assert!(!mask[size.index(0, 0)]);
-        assert!(mask.iter().filter(|&&m| m).count() <= 9);
+        let flagged: Vec<(u16, u16)> = (0..size.height)
+            .flat_map(|y| (0..size.width).map(move |x| (x, y)))
+            .filter(|&(x, y)| mask[size.index(x, y)])
+            .collect();
+        assert_eq!(flagged.len(), 12);
+        assert!(flagged
+            .iter()
+            .all(|&(x, y)| (6..=10).contains(&x) && (8..=12).contains(&y)));
     }
 
     #[test]

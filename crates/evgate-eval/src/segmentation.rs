@@ -122,9 +122,10 @@ impl From<PixelConfusion> for FrameScores {
 }
 
 /// SR@0.5 contribution of one frame: IMO IoU ≥ 0.5. A frame without IMO pixels in prediction
-/// and truth counts as a success (nothing to find, nothing claimed).
-pub fn frame_success(counts: &PixelConfusion, threshold: f64) -> bool {
-    counts.imo_iou().is_none_or(|iou| iou >= threshold)
+/// and truth has no IMO IoU and is left out (`None`), as in the paper's reference code
+/// (uzh-rpg/event_suppression, `metrics.success_at` and its `nanmean`).
+pub fn frame_success(counts: &PixelConfusion, threshold: f64) -> Option<bool> {
+    counts.imo_iou().map(|iou| iou >= threshold)
 }
 
 #[cfg(test)]
@@ -169,14 +170,14 @@ mod tests {
         assert_eq!(counts.imo_iou(), None);
         assert_eq!(counts.background_iou(), Some(1.0));
         assert_eq!(counts.mean_iou(), Some(1.0));
-        assert!(frame_success(&counts, 0.5));
+        assert_eq!(frame_success(&counts, 0.5), None);
     }
 
     #[test]
     fn success_needs_half_overlap() {
         let counts = PixelConfusion::count(&PREDICTION, &TRUTH).unwrap();
-        assert!(frame_success(&counts, 0.5));
-        assert!(!frame_success(&counts, 0.51));
+        assert_eq!(frame_success(&counts, 0.5), Some(true));
+        assert_eq!(frame_success(&counts, 0.51), Some(false));
     }
 
     #[test]

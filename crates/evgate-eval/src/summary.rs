@@ -81,7 +81,8 @@ impl Spread {
 pub struct HorizonAccumulator {
     pub mean_iou: Mean,
     pub imo_iou: Mean,
-    pub successes: u64,
+    /// Frames with IMO IoU ≥ the threshold, over those with an IMO in prediction or truth.
+    pub success: Mean,
     pub frames: u64,
     pub instances: InstanceCounts,
 }
@@ -90,7 +91,8 @@ impl HorizonAccumulator {
     pub fn add(&mut self, pixels: &PixelConfusion, instances: InstanceCounts, threshold: f64) {
         self.mean_iou.add(pixels.mean_iou());
         self.imo_iou.add(pixels.imo_iou());
-        self.successes += u64::from(frame_success(pixels, threshold));
+        self.success
+            .add(frame_success(pixels, threshold).map(|success| f64::from(u8::from(success))));
         self.frames += 1;
         self.instances.merge(instances);
     }
@@ -100,7 +102,7 @@ impl HorizonAccumulator {
             horizon_ms,
             mean_iou: self.mean_iou.value(),
             imo_iou: self.imo_iou.value(),
-            success_rate: (self.frames > 0).then(|| self.successes as f64 / self.frames as f64),
+            success_rate: self.success.value(),
             instance_recall: self.instances.recall(),
             frames: self.frames,
         }
@@ -158,7 +160,8 @@ pub struct HorizonSummary {
     /// Mean over frames of the mean of IMO and background IoU.
     pub mean_iou: Option<f64>,
     pub imo_iou: Option<f64>,
-    /// SR@0.5: share of frames with IMO IoU ≥ the threshold.
+    /// SR@0.5: share of frames with IMO IoU ≥ the threshold, over the frames with an IMO in
+    /// prediction or truth (frames with neither are left out, as in the paper's code).
     pub success_rate: Option<f64>,
     /// R@0.5: found over all ground-truth instances.
     pub instance_recall: Option<f64>,
@@ -247,6 +250,20 @@ impl MethodSummary {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn success_rate_leaves_out_frames_without_any_imo() {
+        let mut horizon = HorizonAccumulator::default();
+        // Nothing in truth nor prediction: left out, as in the paper's code.
+        let empty = PixelConfusion::count(&[false; 4], &[0; 4]).unwrap();
+        horizon.add(&empty, InstanceCounts::default(), 0.5);
+        // A claimed object where there is none: IMO IoU 0, a failure.
+        let false_alarm = PixelConfusion::count(&[true, false, false, false], &[0; 4]).unwrap();
+        horizon.add(&false_alarm, InstanceCounts::default(), 0.5);
+        let summary = horizon.summary(100);
+        assert_eq!(summary.success_rate, Some(0.0));
+        assert_eq!(summary.frames, 2);
+    }
 
     #[test]
     fn mean_skips_undefined_values() {
