@@ -14,6 +14,7 @@ use evgate_model::{ModelError, ModelRuntime};
 use thiserror::Error;
 
 use crate::binned::{BinnedMeans, LogBins, EVENT_BINS_FIRST_DECADE, EVENT_BINS_LAST_DECADE};
+use crate::bootstrap::intervals_over;
 use crate::config::{ConfigError, EvalConfig};
 use crate::event_scores::EventConfusion;
 use crate::instances::match_instances;
@@ -537,6 +538,8 @@ impl Evaluation {
                 })
                 .collect()
         };
+        let headline_ms = self.config.headline_horizon_ms;
+        let method_names = || self.methods.iter().map(|m| m.name.clone());
         let mut preset_names: Vec<&str> =
             self.sequences.iter().map(|s| s.preset.as_str()).collect();
         preset_names.sort_unstable();
@@ -553,11 +556,13 @@ impl Evaluation {
                     preset: preset.to_owned(),
                     sequences: members.len(),
                     methods: average_over(&members),
+                    intervals: intervals_over(&members, method_names(), headline_ms),
                 }
             })
             .collect();
         let all: Vec<&SequenceResult> = self.sequences.iter().collect();
         let overall = average_over(&all);
+        let intervals = intervals_over(&all, method_names(), headline_ms);
 
         let sweep_settings: Vec<SweepScores> = self
             .sweep_settings
@@ -621,6 +626,7 @@ impl Evaluation {
             sequences: self.sequences,
             presets,
             overall,
+            intervals,
             oms_sweep,
             events_per_window,
             object_speed,
@@ -830,6 +836,38 @@ mod tests {
                 true_negative: 2
             }
         );
+    }
+
+    #[test]
+    fn intervals_come_from_the_per_sequence_scores() {
+        // The same recording twice under two names: two sequences with equal scores, so every
+        // interval is the point of that score; one sequence alone gives no interval.
+        let mut evaluation = Evaluation::new(small_config(), Vec::new()).unwrap();
+        for name in ["suite/test/slide-0001.npz", "suite/test/slide-0002.npz"] {
+            let recording = Recording::from_labelled(fixture::sequence(), Path::new(name)).unwrap();
+            evaluation.evaluate(&recording, || {}).unwrap();
+        }
+        let report = evaluation.finish(Some("test".to_owned())).unwrap();
+        let headline = report.config.headline_horizon_ms;
+        let linear = &report.intervals["linear"];
+        let miou = linear[&crate::bootstrap::Metric::MeanIou];
+        let expected = report.overall["linear"]
+            .at(headline)
+            .unwrap()
+            .mean_iou
+            .unwrap();
+        assert!((miou.low - expected).abs() < 1e-12 && (miou.high - expected).abs() < 1e-12);
+        assert!(
+            linear.contains_key(&crate::bootstrap::Metric::PointIou)
+                || report.overall["linear"].point_iou.is_none()
+        );
+        assert!(run(small_config()).intervals["linear"].is_empty());
+        let markdown = crate::markdown::render(&report, &[]);
+        assert!(markdown.contains(&format!(
+            "[{:.1}, {:.1}]",
+            miou.low * 100.0,
+            miou.high * 100.0
+        )));
     }
 
     #[test]

@@ -5,6 +5,8 @@
 //! the reports (JSON, Markdown tables including the ablation and model sizes, PNG plots).
 
 pub mod binned;
+pub mod bootstrap;
+pub mod comparison;
 pub mod components;
 pub mod config;
 pub mod event_scores;

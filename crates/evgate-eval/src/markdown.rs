@@ -2,6 +2,7 @@
 
 use std::fmt::Write;
 
+use crate::bootstrap::{Interval, MethodIntervals, Metric};
 use crate::method::MethodKind;
 use crate::model_tables::model_tables;
 use crate::recording::GroundTruth;
@@ -10,6 +11,20 @@ use crate::summary::{HorizonSummary, MethodSummary};
 
 pub(crate) fn percent(value: Option<f64>) -> String {
     value.map_or_else(|| "–".to_owned(), |v| format!("{:.1}", v * 100.0))
+}
+
+/// A score in percent with its 95 % interval over sequences, when it has one:
+/// `69.2 [66.1, 72.0]`.
+pub(crate) fn percent_within(value: Option<f64>, interval: Option<&Interval>) -> String {
+    match (value, interval) {
+        (Some(_), Some(interval)) => format!(
+            "{} [{:.1}, {:.1}]",
+            percent(value),
+            interval.low * 100.0,
+            interval.high * 100.0
+        ),
+        _ => percent(value),
+    }
 }
 
 pub(crate) fn number(value: Option<f64>, decimals: usize) -> String {
@@ -66,16 +81,38 @@ pub(crate) fn truth_cell(has_masks: bool, text: String) -> String {
     }
 }
 
-/// "mIoU / R@0.5" of one method at one horizon.
-fn iou_and_recall_cell(has_masks: bool, at: Option<&HorizonSummary>) -> String {
+/// "mIoU / R@0.5" of one method at one horizon, each with its interval.
+fn iou_and_recall_cell(
+    has_masks: bool,
+    at: Option<&HorizonSummary>,
+    intervals: Option<&MethodIntervals>,
+) -> String {
+    let interval = |metric: Metric| intervals.and_then(|i| i.get(&metric));
     truth_cell(
         has_masks,
         format!(
             "{} / {}",
-            percent(at.and_then(|h| h.mean_iou)),
-            percent(at.and_then(|h| h.instance_recall))
+            percent_within(at.and_then(|h| h.mean_iou), interval(Metric::MeanIou)),
+            percent_within(
+                at.and_then(|h| h.instance_recall),
+                interval(Metric::InstanceRecall)
+            )
         ),
     )
+}
+
+/// The intervals of `method` per preset column and for "all", as [`method_summaries`].
+pub(crate) fn method_intervals<'a>(
+    report: &'a Report,
+    method: &str,
+) -> Vec<Option<&'a MethodIntervals>> {
+    let mut intervals: Vec<Option<&MethodIntervals>> = report
+        .presets
+        .iter()
+        .map(|p| p.intervals.get(method))
+        .collect();
+    intervals.push(report.intervals.get(method));
+    intervals
 }
 
 pub(crate) fn method_summaries<'a>(
@@ -201,7 +238,8 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         let mut cells = vec![column.clone()];
         for method in &forecasters {
             let at = method_summaries(report, method)[index].and_then(|s| s.at(headline));
-            cells.push(iou_and_recall_cell(with_masks[index], at));
+            let intervals = method_intervals(report, method)[index];
+            cells.push(iou_and_recall_cell(with_masks[index], at, intervals));
         }
         out += &row(&cells);
     }
@@ -212,7 +250,8 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         out,
         "## All metrics, all sequences (mIoU, IMO IoU, SR@0.5, R@0.5 at t + {headline} ms; pIoU at t; \
          per-event scores of the gate over [t, t + {} ms); kept share and event rates in \
-         millions of events per second, which need no ground truth)\n",
+         millions of events per second, which need no ground truth)\n\n\
+         In brackets: the 95 % bootstrap interval over sequences (docs/evaluation.md).\n",
         report.config.gate_span_ms
     );
     let any_masks = *with_masks.last().expect("the all column");
@@ -242,24 +281,28 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
             continue;
         };
         let at = summary.at(headline);
-        let masks = |value: Option<f64>| truth_cell(any_masks, percent(value));
-        let labels = |value: Option<f64>| {
+        let intervals = report.intervals.get(&method.name);
+        let within = |value: Option<f64>, metric: Metric| {
+            percent_within(value, intervals.and_then(|i| i.get(&metric)))
+        };
+        let masks = |value: Option<f64>, metric| truth_cell(any_masks, within(value, metric));
+        let labels = |value: Option<f64>, metric| {
             if any_labels {
-                percent(value)
+                within(value, metric)
             } else {
                 "n/a — no per-event labels in this recording".to_owned()
             }
         };
         out += &row(&[
             method.name.clone(),
-            masks(at.and_then(|h| h.mean_iou)),
-            masks(at.and_then(|h| h.imo_iou)),
-            masks(at.and_then(|h| h.success_rate)),
-            masks(at.and_then(|h| h.instance_recall)),
-            masks(summary.point_iou),
-            labels(summary.events.precision),
-            labels(summary.events.recall),
-            labels(summary.events.f1),
+            masks(at.and_then(|h| h.mean_iou), Metric::MeanIou),
+            masks(at.and_then(|h| h.imo_iou), Metric::ImoIou),
+            masks(at.and_then(|h| h.success_rate), Metric::SuccessRate),
+            masks(at.and_then(|h| h.instance_recall), Metric::InstanceRecall),
+            masks(summary.point_iou, Metric::PointIou),
+            labels(summary.events.precision, Metric::EventPrecision),
+            labels(summary.events.recall, Metric::EventRecall),
+            labels(summary.events.f1, Metric::EventF1),
             percent(summary.kept.kept_ratio),
             rate(summary.kept.event_rate_hz),
             rate(summary.kept.kept_event_rate_hz),
@@ -323,8 +366,12 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         cells.extend(
             method_summaries(report, &method.name)
                 .iter()
+                .zip(method_intervals(report, &method.name))
                 .zip(&with_masks)
-                .map(|(s, &masks)| truth_cell(masks, percent(s.and_then(|s| s.point_iou)))),
+                .map(|((s, intervals), &masks)| {
+                    let interval = intervals.and_then(|i| i.get(&Metric::PointIou));
+                    truth_cell(masks, percent_within(s.and_then(|s| s.point_iou), interval))
+                }),
         );
         out += &row(&cells);
     }
@@ -437,7 +484,11 @@ pub fn render(report: &Report, plots: &[(String, String)]) -> String {
         ];
         for method in &forecasters {
             let at = sequence.methods.get(*method).and_then(|s| s.at(headline));
-            cells.push(iou_and_recall_cell(sequence.ground_truth.has_masks(), at));
+            cells.push(iou_and_recall_cell(
+                sequence.ground_truth.has_masks(),
+                at,
+                None,
+            ));
         }
         out += &row(&cells);
     }

@@ -8,6 +8,7 @@ use evgate_core::SensorSize;
 use serde::{Deserialize, Serialize};
 
 use crate::binned::BinValue;
+use crate::bootstrap::MethodIntervals;
 use crate::config::EvalConfig;
 use crate::method::MethodInfo;
 use crate::oms::OmsParameters;
@@ -47,6 +48,9 @@ pub struct PresetResult {
     pub preset: String,
     pub sequences: usize,
     pub methods: BTreeMap<String, MethodSummary>,
+    /// 95 % bootstrap intervals over this preset's sequences (`crate::bootstrap`).
+    #[serde(default)]
+    pub intervals: BTreeMap<String, MethodIntervals>,
 }
 
 /// Headline scores of one OMS setting.
@@ -127,6 +131,9 @@ pub struct Report {
     pub presets: Vec<PresetResult>,
     /// Averages over all sequences.
     pub overall: BTreeMap<String, MethodSummary>,
+    /// 95 % bootstrap intervals over all sequences of the headline metrics (`crate::bootstrap`).
+    #[serde(default)]
+    pub intervals: BTreeMap<String, MethodIntervals>,
     pub oms_sweep: OmsSweepResult,
     /// mIoU at the headline horizon pooled over frames, binned by events in the window.
     pub events_per_window: BTreeMap<String, Vec<BinValue>>,

@@ -1,6 +1,7 @@
 //! `evgate`: the umbrella command line. Each subcommand lives in its own module; this file only
 //! parses the command line, sets up logging and dispatches.
 
+mod compare;
 mod convert;
 mod eval;
 mod info;
@@ -29,6 +30,9 @@ enum Command {
     Render(render::RenderArgs),
     /// Score the model and the baselines on labelled sequences; write JSON, Markdown and plots.
     Eval(eval::EvalArgs),
+    /// Decide whether a candidate beats a baseline: paired bootstrap over the sequences of two
+    /// evaluation reports (or two methods of one).
+    Compare(compare::CompareArgs),
     /// Run the pipeline (ingest → infer → gate) with a live status line and a final summary.
     Run(run::RunArgs),
     /// Describe an event file: format, sensor, event count, times, rate, polarity, repairs.
@@ -51,6 +55,7 @@ fn main() -> anyhow::Result<()> {
         Command::Sim(args) => sim::run(args),
         Command::Render(args) => render::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Compare(args) => compare::run(args),
         Command::Run(args) => run::run(args),
         Command::Info(args) => info::run(args),
         Command::Convert(args) => convert::run(args),
