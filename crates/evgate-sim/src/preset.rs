@@ -84,6 +84,7 @@ impl Preset {
             noise: 0.6,
             shape_density: 1.2,
             stripes: 0.0,
+            ..TextureStyle::default()
         };
         let office = TextureStyle {
             mean: 0.45,
@@ -91,6 +92,7 @@ impl Preset {
             noise: 0.5,
             shape_density: 0.8,
             stripes: 0.0,
+            ..TextureStyle::default()
         };
         let carpet = TextureStyle {
             mean: 0.35,
@@ -98,6 +100,7 @@ impl Preset {
             noise: 1.0,
             shape_density: 1.0,
             stripes: 0.2,
+            ..TextureStyle::default()
         };
         let poster = TextureStyle {
             mean: 0.5,
@@ -105,6 +108,7 @@ impl Preset {
             noise: 0.7,
             shape_density: 2.0,
             stripes: 0.0,
+            ..TextureStyle::default()
         };
         let wood = TextureStyle {
             mean: 0.45,
@@ -112,6 +116,7 @@ impl Preset {
             noise: 0.6,
             shape_density: 0.7,
             stripes: 0.8,
+            ..TextureStyle::default()
         };
         let toy = TextureStyle {
             mean: 0.55,
@@ -119,6 +124,7 @@ impl Preset {
             noise: 0.3,
             shape_density: 2.0,
             stripes: 0.3,
+            ..TextureStyle::default()
         };
         let scene = match self {
             Preset::Boxes => SceneParams {

@@ -20,6 +20,16 @@ pub struct TextureStyle {
     pub shape_density: f32,
     /// Weight of periodic stripes (wood grain, tiles, lane markings).
     pub stripes: f32,
+    /// Weight of 1/f noise: random-phase waves whose amplitude falls as one over their
+    /// frequency, the amplitude spectrum of natural images.
+    pub spectral: f32,
+    /// Brush strokes and glyph-like marks (clusters of short curved strokes) per
+    /// 32×32-texel cell.
+    pub strokes: f32,
+    /// Weight of one smooth shading gradient across the texture.
+    pub gradient: f32,
+    /// Share of the texture in large regions of low contrast (blank walls, paper, sky).
+    pub flat_share: f32,
 }
 
 impl Default for TextureStyle {
@@ -30,6 +40,10 @@ impl Default for TextureStyle {
             noise: 0.5,
             shape_density: 1.0,
             stripes: 0.0,
+            spectral: 0.0,
+            strokes: 0.0,
+            gradient: 0.0,
+            flat_share: 0.0,
         }
     }
 }
@@ -107,6 +121,17 @@ impl Level {
     }
 }
 
+impl TextureStyle {
+    /// No pattern at all: a base to switch single families on.
+    pub fn blank() -> Self {
+        Self {
+            noise: 0.0,
+            shape_density: 0.0,
+            ..Self::default()
+        }
+    }
+}
+
 impl Texture {
     /// Builds a texture from level-0 log-reflectance texels (`size` must be a power of two).
     pub fn from_texels(size: usize, texels: Vec<f32>) -> Texture {
@@ -128,6 +153,12 @@ impl Texture {
         add_value_noise(&mut texels, size, style.noise, rng);
         add_shapes(&mut texels, size, style.shape_density, rng);
         add_stripes(&mut texels, size, style.stripes, rng);
+        // The families below draw from `rng` only when used, so textures without them (every
+        // suite before version 5) are unchanged.
+        add_spectral_noise(&mut texels, size, style.spectral, rng);
+        add_strokes(&mut texels, size, style.strokes, rng);
+        add_gradient(&mut texels, size, style.gradient, rng);
+        flatten_regions(&mut texels, size, style.flat_share, rng);
         normalise(&mut texels, style.mean, style.contrast);
         for texel in texels.iter_mut() {
             *texel = texel.ln();
@@ -189,9 +220,21 @@ fn add_value_noise(texels: &mut [f32], size: usize, weight: f32, rng: &mut impl 
     if weight <= 0.0 {
         return;
     }
-    let mut cells = 4usize;
+    add_value_noise_octaves(texels, size, weight, 4, size / 2, rng);
+}
+
+/// Value-noise octaves from `first_cells` to `last_cells` grid cells per side.
+fn add_value_noise_octaves(
+    texels: &mut [f32],
+    size: usize,
+    weight: f32,
+    first_cells: usize,
+    last_cells: usize,
+    rng: &mut impl Rng,
+) {
+    let mut cells = first_cells;
     let mut amplitude = weight;
-    while cells <= size / 2 {
+    while cells <= last_cells {
         let grid: Vec<f32> = (0..cells * cells)
             .map(|_| rng.gen_range(-1.0..1.0))
             .collect();
@@ -276,6 +319,154 @@ fn add_stripes(texels: &mut [f32], size: usize, weight: f32, rng: &mut impl Rng)
     }
 }
 
+/// 1/f noise: 48 tileable waves (integer wave numbers) with log-uniform frequencies from one
+/// period per texture to one per 4 texels, random orientations and phases, amplitude ∝ 1/f.
+fn add_spectral_noise(texels: &mut [f32], size: usize, weight: f32, rng: &mut impl Rng) {
+    if weight <= 0.0 {
+        return;
+    }
+    const WAVES: usize = 48;
+    let highest = (size as f32 / 4.0).max(1.0);
+    let mut waves = Vec::with_capacity(WAVES);
+    while waves.len() < WAVES {
+        let frequency = highest.powf(rng.gen_range(0.0..1.0f32));
+        let angle = rng.gen_range(0.0..std::f32::consts::TAU);
+        let (kx, ky) = (
+            (frequency * angle.cos()).round(),
+            (frequency * angle.sin()).round(),
+        );
+        let phase = rng.gen_range(0.0..std::f32::consts::TAU);
+        if kx == 0.0 && ky == 0.0 {
+            continue;
+        }
+        let amplitude = weight / (kx * kx + ky * ky).sqrt();
+        waves.push((kx, ky, phase, amplitude));
+    }
+    let step = std::f32::consts::TAU / size as f32;
+    for y in 0..size {
+        for x in 0..size {
+            let texel = &mut texels[y * size + x];
+            for &(kx, ky, phase, amplitude) in &waves {
+                *texel += amplitude * ((kx * x as f32 + ky * y as f32) * step + phase).sin();
+            }
+        }
+    }
+}
+
+/// Curved brush strokes (quadratic Bézier curves stamped with a round brush) and glyph-like
+/// marks (two to four short strokes inside a small box), each with its own grey and opacity.
+fn add_strokes(texels: &mut [f32], size: usize, density: f32, rng: &mut impl Rng) {
+    if density <= 0.0 {
+        return;
+    }
+    let cells = (size as f32 / 32.0).powi(2);
+    let marks = (density * cells).ceil() as usize;
+    for _ in 0..marks {
+        let value: f32 = rng.gen_range(-1.2..1.2);
+        let opacity: f32 = rng.gen_range(0.4..1.0);
+        let origin = (
+            rng.gen_range(0.0..size as f32),
+            rng.gen_range(0.0..size as f32),
+        );
+        let glyph = rng.gen_bool(0.4);
+        let (strokes, reach, width) = if glyph {
+            (
+                rng.gen_range(2..=4),
+                rng.gen_range(3.0..8.0f32),
+                rng.gen_range(0.8..1.8f32),
+            )
+        } else {
+            (
+                1,
+                rng.gen_range(4.0..(size as f32 / 6.0).max(5.0)),
+                rng.gen_range(1.0..4.0f32),
+            )
+        };
+        for _ in 0..strokes {
+            let mut point = || {
+                (
+                    origin.0 + rng.gen_range(-reach..reach),
+                    origin.1 + rng.gen_range(-reach..reach),
+                )
+            };
+            let (a, control, b) = (point(), point(), point());
+            stamp_curve(texels, size, [a, control, b], width, value, opacity);
+        }
+    }
+}
+
+/// Stamps a round brush of `width` texels along a quadratic Bézier curve, wrapping around.
+fn stamp_curve(
+    texels: &mut [f32],
+    size: usize,
+    [a, c, b]: [(f32, f32); 3],
+    width: f32,
+    value: f32,
+    opacity: f32,
+) {
+    let length = ((a.0 - c.0).hypot(a.1 - c.1) + (c.0 - b.0).hypot(c.1 - b.1)).max(1.0);
+    let steps = (length * 2.0).ceil() as usize;
+    let radius = width / 2.0;
+    let reach = radius.ceil() as i64;
+    let mut painted = std::collections::HashSet::new();
+    for step in 0..=steps {
+        let t = step as f32 / steps as f32;
+        let (u, v) = (1.0 - t, t);
+        let x = u * u * a.0 + 2.0 * u * v * c.0 + v * v * b.0;
+        let y = u * u * a.1 + 2.0 * u * v * c.1 + v * v * b.1;
+        for dy in -reach..=reach {
+            for dx in -reach..=reach {
+                let (px, py) = (x.floor() as i64 + dx, y.floor() as i64 + dy);
+                let (cx, cy) = (px as f32 + 0.5 - x, py as f32 + 0.5 - y);
+                if cx * cx + cy * cy > radius * radius + 0.25 {
+                    continue;
+                }
+                let index = py.rem_euclid(size as i64) as usize * size
+                    + px.rem_euclid(size as i64) as usize;
+                // Each texel once per stroke, so overlapping brush stamps do not stack.
+                if painted.insert(index) {
+                    let texel = &mut texels[index];
+                    *texel += (value - *texel) * opacity;
+                }
+            }
+        }
+    }
+}
+
+/// One smooth period of shading across the texture in a random direction (tileable).
+fn add_gradient(texels: &mut [f32], size: usize, weight: f32, rng: &mut impl Rng) {
+    if weight <= 0.0 {
+        return;
+    }
+    let (kx, ky) = [(1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, -1.0)][rng.gen_range(0..4)];
+    let phase = rng.gen_range(0.0..std::f32::consts::TAU);
+    let step = std::f32::consts::TAU / size as f32;
+    for y in 0..size {
+        for x in 0..size {
+            texels[y * size + x] += weight * ((kx * x as f32 + ky * y as f32) * step + phase).cos();
+        }
+    }
+}
+
+/// Pulls `share` of the texture, in a few large blobs (a coarse noise field above its
+/// quantile), to nearly one level: a tenth of its contrast is left there, with a soft border.
+fn flatten_regions(texels: &mut [f32], size: usize, share: f32, rng: &mut impl Rng) {
+    if share <= 0.0 {
+        return;
+    }
+    let mut field = vec![0.0f32; size * size];
+    add_value_noise_octaves(&mut field, size, 1.0, 4, 8, rng);
+    let mut sorted = field.clone();
+    sorted.sort_by(f32::total_cmp);
+    let cut = sorted[((1.0 - share.min(1.0)) * (sorted.len() - 1) as f32) as usize];
+    let soft = 0.05;
+    let level = texels.iter().sum::<f32>() / texels.len() as f32;
+    for (texel, &f) in texels.iter_mut().zip(&field) {
+        let flat = smoothstep(((f - cut) / soft + 0.5).clamp(0.0, 1.0));
+        *texel += (level + (*texel - level) * 0.1 - *texel) * flat;
+    }
+}
+
 /// Maps texel values linearly to `mean ± mean·contrast`, clamped to a positive reflectance.
 fn normalise(texels: &mut [f32], mean: f32, contrast: f32) {
     let (lo, hi) = texels
@@ -330,6 +521,74 @@ mod tests {
             assert_eq!(approximate_log2(x), x.log2());
         }
         assert!((approximate_log2(3.0) - 3f32.log2()).abs() < 0.1);
+    }
+
+    fn row_spread(texture: &Texture, row: f32) -> f32 {
+        let samples: Vec<f32> = (0..texture.size())
+            .map(|i| texture.sample(i as f32 + 0.5, row, 1.0))
+            .collect();
+        let lo = samples.iter().cloned().fold(f32::MAX, f32::min);
+        let hi = samples.iter().cloned().fold(f32::MIN, f32::max);
+        hi - lo
+    }
+
+    #[test]
+    fn every_family_alone_makes_a_textured_image_in_range() {
+        let families = [
+            TextureStyle {
+                spectral: 1.0,
+                ..TextureStyle::blank()
+            },
+            TextureStyle {
+                strokes: 2.0,
+                ..TextureStyle::blank()
+            },
+            TextureStyle {
+                gradient: 1.0,
+                ..TextureStyle::blank()
+            },
+        ];
+        for style in families {
+            let mut rng = ChaCha8Rng::seed_from_u64(5);
+            let texture = Texture::generate(128, &style, &mut rng);
+            let texels = texture.level_texels()[0];
+            assert!(texels
+                .iter()
+                .all(|t| t.exp() >= 0.0099 && t.exp() <= 1.0001));
+            let spread = (0..128)
+                .map(|row| row_spread(&texture, row as f32 + 0.5))
+                .fold(0.0, f32::max);
+            assert!(spread > 0.1, "{style:?} left the texture flat");
+        }
+    }
+
+    #[test]
+    fn flat_regions_cover_their_share_with_little_contrast() {
+        let busy = TextureStyle {
+            noise: 0.0,
+            shape_density: 0.0,
+            spectral: 1.0,
+            ..TextureStyle::default()
+        };
+        let flat = TextureStyle {
+            flat_share: 0.5,
+            ..busy
+        };
+        let gradients = |style: &TextureStyle| -> Vec<f32> {
+            let mut rng = ChaCha8Rng::seed_from_u64(11);
+            let texture = Texture::generate(128, style, &mut rng);
+            let texels = texture.level_texels()[0];
+            let mut steps: Vec<f32> = (0..128 * 127)
+                .map(|i| (i / 127) * 128 + i % 127)
+                .map(|i| (texels[i + 1] - texels[i]).abs())
+                .collect();
+            steps.sort_by(f32::total_cmp);
+            steps
+        };
+        let (busy_steps, flat_steps) = (gradients(&busy), gradients(&flat));
+        // The quietest third of the texture is much quieter with half of it flattened.
+        let third = busy_steps.len() / 3;
+        assert!(flat_steps[third] < busy_steps[third] * 0.5);
     }
 
     #[test]

@@ -387,6 +387,7 @@ fn add_street(
         noise: 1.0,
         shape_density: 0.2,
         stripes: 0.6,
+        ..TextureStyle::default()
     };
     let facade = TextureStyle {
         shape_density: 2.0,
@@ -398,6 +399,7 @@ fn add_street(
         noise: 1.0,
         shape_density: 0.0,
         stripes: 0.0,
+        ..TextureStyle::default()
     };
     let street_half_width = rng.gen_range(7.0..10.0);
     let planes = [

@@ -132,7 +132,10 @@ mod tests {
     #[test]
     fn an_unknown_metric_lists_the_accepted_ones() {
         let error = parse_metric("accuracy").unwrap_err();
-        assert!(error.contains("accuracy") && error.contains("miou, imo-iou"), "{error}");
+        assert!(
+            error.contains("accuracy") && error.contains("miou, imo-iou"),
+            "{error}"
+        );
         assert_eq!(parse_metric("event-f1"), Ok(Metric::EventF1));
     }
 
