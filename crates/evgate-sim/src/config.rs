@@ -1,5 +1,7 @@
 //! Complete simulator configuration: sensor, optics, scene recipe and pixel model.
 
+use std::path::PathBuf;
+
 use evgate_core::SensorSize;
 use serde::{Deserialize, Serialize};
 
@@ -45,6 +47,10 @@ pub struct SceneParams {
     pub drive_mps: f32,
     pub world_texture: TextureStyle,
     pub object_texture: TextureStyle,
+    /// PNG photographs that replace every procedural texture, world and objects alike, each
+    /// surface drawing one at random (`crate::photo`); empty: procedural textures only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub photographs: Vec<PathBuf>,
 }
 
 /// Everything that determines a simulation besides the seed.

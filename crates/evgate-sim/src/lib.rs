@@ -20,6 +20,7 @@
 pub mod atlas;
 pub mod camera;
 pub mod config;
+pub mod domain;
 pub mod esim;
 pub mod event_model;
 pub mod event_sort;
@@ -27,6 +28,7 @@ mod index_lanes;
 pub mod linalg;
 pub mod motion;
 pub mod noise;
+pub mod photo;
 pub mod preset;
 pub mod render;
 pub mod scene;
@@ -38,6 +40,7 @@ pub mod world;
 
 pub use camera::Intrinsics;
 pub use config::{Layout, SceneParams, SimConfig};
+pub use domain::{randomised_config, Domain};
 pub use esim::LabelledEvent;
 pub use event_model::EventModel;
 pub use preset::{Preset, UnknownPreset};

@@ -139,6 +139,7 @@ impl Preset {
                 drive_mps: 0.0,
                 world_texture: office,
                 object_texture: cardboard,
+                photographs: Vec::new(),
             },
             Preset::Floor => SceneParams {
                 layout: Layout::Floor,
@@ -152,6 +153,7 @@ impl Preset {
                 drive_mps: 0.0,
                 world_texture: carpet,
                 object_texture: cardboard,
+                photographs: Vec::new(),
             },
             Preset::Wall => SceneParams {
                 layout: Layout::Wall,
@@ -165,6 +167,7 @@ impl Preset {
                 drive_mps: 0.0,
                 world_texture: poster,
                 object_texture: toy,
+                photographs: Vec::new(),
             },
             Preset::Table => SceneParams {
                 layout: Layout::Table,
@@ -178,6 +181,7 @@ impl Preset {
                 drive_mps: 0.0,
                 world_texture: wood,
                 object_texture: toy,
+                photographs: Vec::new(),
             },
             Preset::Fast => SceneParams {
                 layout: Layout::Room,
@@ -191,6 +195,7 @@ impl Preset {
                 drive_mps: 0.0,
                 world_texture: office,
                 object_texture: toy,
+                photographs: Vec::new(),
             },
             Preset::Tabletop => SceneParams {
                 layout: Layout::Table,
@@ -204,6 +209,7 @@ impl Preset {
                 drive_mps: 0.0,
                 world_texture: wood,
                 object_texture: toy,
+                photographs: Vec::new(),
             },
             Preset::Driving => SceneParams {
                 layout: Layout::Road,
@@ -217,6 +223,7 @@ impl Preset {
                 drive_mps: 8.0,
                 world_texture: office,
                 object_texture: cardboard,
+                photographs: Vec::new(),
             },
         };
         SimConfig {

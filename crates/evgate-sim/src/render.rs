@@ -1916,7 +1916,7 @@ mod tests {
             Preset::Driving,
         ] {
             let config = preset.config().at_reduced_resolution(4);
-            let scene = build_scene(&config, &mut ChaCha8Rng::seed_from_u64(4));
+            let scene = build_scene(&config, &[], &mut ChaCha8Rng::seed_from_u64(4));
             let (width, height) = (config.sensor.width as usize, config.sensor.height as usize);
             for t_s in [0.0, 0.37, 1.3, 2.2] {
                 let snapshot = Snapshot::new(&scene, t_s);
@@ -1980,7 +1980,7 @@ mod tests {
     #[test]
     fn a_rooms_walls_are_searched_about_once_per_pixel() {
         let config = Preset::Fast.config();
-        let scene = build_scene(&config, &mut ChaCha8Rng::seed_from_u64(4));
+        let scene = build_scene(&config, &[], &mut ChaCha8Rng::seed_from_u64(4));
         let (width, height) = (config.sensor.width as usize, config.sensor.height as usize);
         for t_s in [0.0, 0.37, 1.3] {
             let snapshot = Snapshot::static_world(&scene, t_s);
@@ -2012,7 +2012,7 @@ mod tests {
             let config = preset.config().at_reduced_resolution(2);
             let (width, height) = (config.sensor.width as usize, config.sensor.height as usize);
             for seed in [4, 9, 13] {
-                let scene = build_scene(&config, &mut ChaCha8Rng::seed_from_u64(seed));
+                let scene = build_scene(&config, &[], &mut ChaCha8Rng::seed_from_u64(seed));
                 for t_s in [0.0, 0.37, 1.3, 2.2] {
                     let snapshot = Snapshot::new(&scene, t_s);
                     let static_world = Snapshot::static_world(&scene, t_s);

@@ -24,10 +24,11 @@ use crate::config::SimConfig;
 use crate::esim::{split_off_front, split_off_front_shared, LabelledEvent, PixelBand, PixelState};
 use crate::event_sort::EventSorter;
 use crate::noise::NoiseSource;
+use crate::photo::{load_photographs, PhotoError};
 use crate::preset::Preset;
 use crate::render::{Frame, RowScratch, Snapshot};
 use crate::scene::Scene;
-use crate::world::build_scene;
+use crate::world::{build_scene, TEXTURE_SIZE};
 
 /// Rendering probes image motion over this interval to choose the next step (of the static
 /// world or of the objects).
@@ -53,6 +54,8 @@ pub enum SimulatorError {
         "simulator config: sensor size {0} has no pixels; width and height must be at least 1"
     )]
     EmptySensor(SensorSize),
+    #[error("simulator config: field `scene.photographs`: {0}")]
+    Photograph(#[from] PhotoError),
     #[error("simulator config: field `scene.{field}` = {value} is invalid; accepted: {accepted}")]
     BadScene {
         field: &'static str,
@@ -164,8 +167,9 @@ impl Simulator {
                 accepted: "[min, max] with 0 < min <= max",
             });
         }
+        let photographs = load_photographs(&scene_params.photographs, TEXTURE_SIZE)?;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let scene = build_scene(&config, &mut rng);
+        let scene = build_scene(&config, &photographs, &mut rng);
         let pixels = config.sensor.pixels();
         let mut frame = Frame::new(pixels);
         let threads = std::thread::available_parallelism()

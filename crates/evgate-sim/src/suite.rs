@@ -1,16 +1,22 @@
 //! The versioned benchmark suite: which sequences (preset, seed, duration) form the train,
-//! validation and test splits. Seeds of different splits never overlap, so a model is never
-//! evaluated on a scene it was trained on.
+//! validation, test and out-of-domain test splits. Seeds of different splits never overlap, so a
+//! model is never evaluated on a scene it was trained on. Version 5 randomises every sequence's
+//! textures and sensor (`crate::domain`); its `test-ood` split uses photographs and sensors
+//! outside the training ranges and is never used to choose anything.
 
 use std::fmt;
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+use std::path::PathBuf;
+
+use crate::config::SimConfig;
+use crate::domain::{randomised_config, Domain};
 use crate::preset::Preset;
 
 /// Bumped whenever the plan or the simulator's output for a given seed changes.
-pub const SUITE_VERSION: &str = "evgate-sim-suite/4";
+pub const SUITE_VERSION: &str = "evgate-sim-suite/5";
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -18,6 +24,8 @@ pub enum Split {
     Train,
     Val,
     Test,
+    /// Photographs and sensors outside the training ranges: for reporting generalisation only.
+    TestOod,
 }
 
 impl Split {
@@ -26,7 +34,16 @@ impl Split {
             Split::Train => "train",
             Split::Val => "val",
             Split::Test => "test",
+            Split::TestOod => "test-ood",
         }
+    }
+
+    /// Every split, in generation order.
+    pub const ALL: [Split; 4] = [Split::Train, Split::Val, Split::Test, Split::TestOod];
+
+    /// The split called `name`.
+    pub fn from_name(name: &str) -> Option<Split> {
+        Split::ALL.into_iter().find(|split| split.name() == name)
     }
 
     /// Seeds of a split start here; presets take consecutive blocks of 1000 within it.
@@ -35,6 +52,7 @@ impl Split {
             Split::Train => 100_000,
             Split::Val => 200_000,
             Split::Test => 300_000,
+            Split::TestOod => 400_000,
         }
     }
 }
@@ -89,41 +107,34 @@ pub struct SuiteEntry {
     pub duration_us: i64,
 }
 
-/// Sequences per split and their duration, for one group of presets.
+/// Sequences per split and their duration, for one preset.
 struct Counts {
     train: u64,
     val: u64,
     test: u64,
+    test_ood: u64,
     duration_us: i64,
 }
 
 impl SuiteScale {
-    fn counts(self, preset: Preset) -> Counts {
-        let driving = preset == Preset::Driving;
-        match (self, driving) {
-            (SuiteScale::Small, false) => Counts {
+    fn counts(self) -> Counts {
+        match self {
+            // One sequence per preset and split: the same code paths in minutes.
+            SuiteScale::Small => Counts {
                 train: 2,
                 val: 1,
                 test: 1,
+                test_ood: 1,
                 duration_us: 3_000_000,
             },
-            (SuiteScale::Small, true) => Counts {
-                train: 1,
-                val: 1,
-                test: 1,
-                duration_us: 2_000_000,
-            },
-            (SuiteScale::Full, false) => Counts {
-                train: 8,
-                val: 2,
-                test: 2,
-                duration_us: 5_000_000,
-            },
-            (SuiteScale::Full, true) => Counts {
-                train: 4,
-                val: 1,
-                test: 1,
-                duration_us: 5_000_000,
+            // Val and test large enough for intervals of about ±2 points over 28 sequences,
+            // train ten times val, and at least 12 out-of-domain sequences.
+            SuiteScale::Full => Counts {
+                train: 40,
+                val: 4,
+                test: 4,
+                test_ood: 2,
+                duration_us: 3_000_000,
             },
         }
     }
@@ -132,13 +143,14 @@ impl SuiteScale {
 /// Every sequence of the suite at `scale`, in generation order.
 pub fn suite_plan(scale: SuiteScale) -> Vec<SuiteEntry> {
     let mut entries = Vec::new();
-    for split in [Split::Train, Split::Val, Split::Test] {
+    for split in Split::ALL {
         for (preset_index, preset) in Preset::ALL.into_iter().enumerate() {
-            let counts = scale.counts(preset);
+            let counts = scale.counts();
             let count = match split {
                 Split::Train => counts.train,
                 Split::Val => counts.val,
                 Split::Test => counts.test,
+                Split::TestOod => counts.test_ood,
             };
             for i in 0..count {
                 let seed = split.seed_base() + preset_index as u64 * 1000 + i;
@@ -153,6 +165,20 @@ pub fn suite_plan(scale: SuiteScale) -> Vec<SuiteEntry> {
         }
     }
     entries
+}
+
+impl SuiteEntry {
+    /// The simulator configuration of this sequence: its preset with textures and sensor drawn
+    /// for its seed, in-domain, or with `photographs` and an out-of-range sensor for `test-ood`.
+    pub fn config(&self, photographs: &[PathBuf]) -> SimConfig {
+        let domain = match self.split {
+            Split::TestOod => Domain::OutOfDomain {
+                photographs: photographs.to_vec(),
+            },
+            _ => Domain::InDomain,
+        };
+        randomised_config(self.preset, self.seed, &domain)
+    }
 }
 
 #[cfg(test)]
@@ -170,7 +196,7 @@ mod tests {
                 plan.len(),
                 "a seed repeats in the {scale} suite"
             );
-            for split in [Split::Train, Split::Val, Split::Test] {
+            for split in Split::ALL {
                 let presets: HashSet<Preset> = plan
                     .iter()
                     .filter(|e| e.split == split)
@@ -182,6 +208,37 @@ mod tests {
                     "{scale} {split:?} misses a preset"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn the_full_suite_has_the_sizes_version_5_promises() {
+        let plan = suite_plan(SuiteScale::Full);
+        let count = |split: Split, preset: Preset| {
+            plan.iter()
+                .filter(|e| e.split == split && e.preset == preset)
+                .count()
+        };
+        for preset in Preset::ALL {
+            assert!(count(Split::Val, preset) >= 4 && count(Split::Test, preset) >= 4);
+        }
+        let total = |split: Split| plan.iter().filter(|e| e.split == split).count();
+        assert!(total(Split::Train) >= 10 * total(Split::Val));
+        assert!(total(Split::TestOod) >= 12);
+        assert!(plan.iter().all(|e| e.duration_us >= 3_000_000));
+    }
+
+    #[test]
+    fn only_the_out_of_domain_split_gets_photographs() {
+        let photographs = [PathBuf::from("a.png")];
+        for entry in suite_plan(SuiteScale::Small) {
+            let config = entry.config(&photographs);
+            assert_eq!(
+                config.scene.photographs.is_empty(),
+                entry.split != Split::TestOod,
+                "{}",
+                entry.name
+            );
         }
     }
 

@@ -11,7 +11,8 @@ use crate::motion::{EgoMotion, ObjectPath, Vec3Def, Wobble};
 use crate::scene::{MovingObject, Panel, Scene, Shape};
 use crate::texture::{Texture, TextureStyle};
 
-const TEXTURE_SIZE: usize = 256;
+/// Side of every texture in texels.
+pub const TEXTURE_SIZE: usize = 256;
 
 /// Share of the image width and height, centred, within which the filmed object's path stays
 /// at the camera's base pose; the ego wobble (up to about a third of the field of view) then
@@ -30,11 +31,18 @@ struct ObjectRegion {
     ground_y: Option<f32>,
 }
 
-pub fn build_scene(config: &SimConfig, rng: &mut impl Rng) -> Scene {
+/// Builds the scene of `config`; with `photographs`, every surface takes one of them at random
+/// instead of a procedural texture of its style.
+pub fn build_scene(config: &SimConfig, photographs: &[Texture], rng: &mut impl Rng) -> Scene {
     let params = &config.scene;
     let mut textures = Vec::new();
     let mut new_texture = |style: &TextureStyle, rng: &mut dyn rand::RngCore| {
-        textures.push(Texture::generate(TEXTURE_SIZE, style, &mut RngAdapter(rng)));
+        let mut rng = RngAdapter(rng);
+        textures.push(if photographs.is_empty() {
+            Texture::generate(TEXTURE_SIZE, style, &mut rng)
+        } else {
+            photographs[rng.gen_range(0..photographs.len())].clone()
+        });
         textures.len() - 1
     };
     let world_style = params.world_texture;

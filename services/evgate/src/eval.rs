@@ -30,7 +30,8 @@ const DEFAULT_FLOPS_TABLES: [&str; 2] = [
 /// Evaluate forecasts and baselines on labelled sequences and write a report.
 #[derive(Args)]
 pub struct EvalArgs {
-    /// Suite split to evaluate: train, val or test (sequences under SUITE/SPLIT/*/sequence.npz).
+    /// Suite split to evaluate: train, val, test or test-ood (sequences under
+    /// SUITE/SPLIT/*/sequence.npz). Choices are made on val; test-ood only reports.
     #[arg(long, default_value = "test")]
     pub split: String,
     /// Root folder of the simulator's suite (as written by `evgate sim suite`).
@@ -265,9 +266,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
 
 /// The sequences of one split: SUITE/SPLIT/<name>/sequence.npz and SUITE/SPLIT/*.npz, sorted.
 fn split_sequences(suite: &Path, split: &str) -> anyhow::Result<Vec<PathBuf>> {
-    const SPLITS: [&str; 3] = ["train", "val", "test"];
-    if !SPLITS.contains(&split) {
-        bail!("unknown split {split:?}; accepted: train, val, test");
+    if evgate_sim::Split::from_name(split).is_none() {
+        let accepted: Vec<&str> = evgate_sim::Split::ALL.iter().map(|s| s.name()).collect();
+        bail!("unknown split {split:?}; accepted: {}", accepted.join(", "));
     }
     let folder = suite.join(split);
     let entries = fs::read_dir(&folder).with_context(|| {

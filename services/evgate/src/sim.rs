@@ -8,8 +8,8 @@ use anyhow::Context;
 use clap::Args;
 use evgate_sim::sequence::SequenceReport;
 use evgate_sim::{
-    simulate_sequence, suite_plan, Preset, SequenceOptions, SimConfig, SuiteEntry, SuiteScale,
-    SUITE_VERSION,
+    simulate_sequence, suite_plan, Preset, SequenceOptions, SimConfig, Split, SuiteEntry,
+    SuiteScale, SUITE_VERSION,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
@@ -27,8 +27,8 @@ pub struct SimArgs {
 
 #[derive(clap::Subcommand)]
 pub enum SimCommand {
-    /// Generate the versioned train/val/test benchmark suite with a manifest (seeds,
-    /// parameters, event counts, SHA-256 of every file).
+    /// Generate the versioned train/val/test/test-ood benchmark suite with a manifest (seeds,
+    /// parameters, event counts, SHA-256 of every file and photograph).
     Suite(SuiteArgs),
 }
 
@@ -38,9 +38,21 @@ pub struct SuiteArgs {
     /// <OUT>/manifest.json.
     #[arg(long)]
     pub out: PathBuf,
-    /// Suite size: small (78 simulated seconds, for quick training runs) or full (390 s).
+    /// Suite size: small (105 simulated seconds: 2 train, 1 val, 1 test and 1 test-ood sequence
+    /// of 3 s per preset, for quick checks) or full (1050 s: 40, 4, 4 and 2 per preset).
     #[arg(long, default_value = "small")]
     pub scale: SuiteScale,
+    /// Splits to generate, comma-separated: train, val, test, test-ood (default: all).
+    #[arg(long, value_delimiter = ',', value_parser = parse_split)]
+    pub splits: Vec<Split>,
+    /// Folder of PNG photographs for the test-ood split (scripts/fetch-photos.sh fills the
+    /// default); every PNG in it is used, in name order.
+    #[arg(long, default_value = "data/photos")]
+    pub photos: PathBuf,
+    /// After generating, compare every file's SHA-256 (and every photograph's) with this
+    /// manifest of an earlier run; fails listing each difference.
+    #[arg(long, value_name = "MANIFEST")]
+    pub verify: Option<PathBuf>,
     /// Print the manifest totals as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -82,6 +94,8 @@ pub struct SequenceSummary {
     pub object_event_share: f64,
     pub on_event_share: f64,
     pub events_per_second: f64,
+    /// Events per 50 ms window (the network's input span): fewest, median and most.
+    pub events_per_window: WindowCounts,
     pub object_count: usize,
     pub renders: u64,
     pub wall_s: f64,
@@ -144,6 +158,37 @@ fn run_sequence(args: SequenceArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Events per window of one sequence.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub struct WindowCounts {
+    pub window_ms: u32,
+    pub min: u64,
+    pub median: u64,
+    pub max: u64,
+}
+
+impl WindowCounts {
+    /// Counts of the consecutive `window_us` windows from 0 that `events` (in time order) span.
+    fn of(events: &[evgate_core::Event], duration_us: i64, window_us: i64) -> WindowCounts {
+        let windows = (duration_us / window_us).max(1) as usize;
+        let mut counts = vec![0u64; windows];
+        for event in events {
+            let index = (event.t.max(0) / window_us) as usize;
+            if let Some(count) = counts.get_mut(index) {
+                *count += 1;
+            }
+        }
+        counts.sort_unstable();
+        WindowCounts {
+            window_ms: (window_us / 1000) as u32,
+            min: counts[0],
+            median: counts[counts.len() / 2],
+            max: counts[counts.len() - 1],
+        }
+    }
+}
+
 /// Reads a simulator configuration (the JSON form of [`SimConfig`]).
 pub fn load_config(path: &Path) -> anyhow::Result<SimConfig> {
     let text = fs::read_to_string(path)
@@ -180,11 +225,13 @@ pub fn write_sequence(
     writer
         .finish()
         .with_context(|| format!("cannot finish {}", evg.display()))?;
+    let window_counts = WindowCounts::of(&sequence.events, options.duration_us, 50_000);
     Ok(summarise(
         config,
         seed,
         options,
         &report,
+        window_counts,
         wall_s,
         vec![evg, npz],
     ))
@@ -195,6 +242,7 @@ fn summarise(
     seed: u64,
     options: &SequenceOptions,
     report: &SequenceReport,
+    events_per_window: WindowCounts,
     wall_s: f64,
     files: Vec<PathBuf>,
 ) -> SequenceSummary {
@@ -209,6 +257,7 @@ fn summarise(
         object_event_share: stats.object_events as f64 / events,
         on_event_share: stats.on_events as f64 / events,
         events_per_second: stats.events as f64 / duration_s,
+        events_per_window,
         object_count: report.object_count,
         renders: stats.renders,
         wall_s,
@@ -244,6 +293,7 @@ struct ManifestEntry {
     events: u64,
     object_event_share: f64,
     on_event_share: f64,
+    events_per_window: WindowCounts,
     object_count: usize,
     renders: u64,
     wall_s: f64,
@@ -269,11 +319,64 @@ struct Manifest {
     generator: String,
     scale: SuiteScale,
     totals: SuiteTotals,
+    /// The photographs of the test-ood split, relative to `--photos`, with their SHA-256.
+    photographs: Vec<ManifestFile>,
     sequences: Vec<ManifestEntry>,
 }
 
+fn parse_split(name: &str) -> Result<Split, String> {
+    Split::from_name(name).ok_or_else(|| {
+        let accepted: Vec<&str> = Split::ALL.iter().map(|s| s.name()).collect();
+        format!("{name:?} is not a split; accepted: {}", accepted.join(", "))
+    })
+}
+
+/// The PNG files of `dir`, in name order; the test-ood split needs at least one.
+fn photographs_in(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let entries = fs::read_dir(dir).with_context(|| {
+        format!(
+            "--photos {}: cannot list the photographs of the test-ood split; \
+             run scripts/fetch-photos.sh or name a folder of PNG files",
+            dir.display()
+        )
+    })?;
+    let mut photographs = Vec::new();
+    for entry in entries {
+        let path = entry
+            .with_context(|| format!("cannot list {}", dir.display()))?
+            .path();
+        if path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+        {
+            photographs.push(path);
+        }
+    }
+    photographs.sort();
+    if photographs.is_empty() {
+        anyhow::bail!(
+            "--photos {}: no PNG file there; the test-ood split needs photographs \
+             (scripts/fetch-photos.sh)",
+            dir.display()
+        );
+    }
+    Ok(photographs)
+}
+
 fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
-    let plan = suite_plan(args.scale);
+    let plan: Vec<SuiteEntry> = suite_plan(args.scale)
+        .into_iter()
+        .filter(|entry| args.splits.is_empty() || args.splits.contains(&entry.split))
+        .collect();
+    let photographs = if plan.iter().any(|entry| entry.split == Split::TestOod) {
+        photographs_in(&args.photos)?
+    } else {
+        Vec::new()
+    };
+    let photograph_files = photographs
+        .iter()
+        .map(|path| describe_file(path, &args.photos))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let total_us: i64 = plan.iter().map(|e| e.duration_us + e.duration_us / 4).sum();
     let bar = progress_bar(
         total_us,
@@ -287,7 +390,7 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
         bar.set_message(entry.name.clone());
         let dir = args.out.join(&entry.name);
         fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let config = entry.preset.config();
+        let config = entry.config(&photographs);
         let options = SequenceOptions {
             duration_us: entry.duration_us,
             ..SequenceOptions::default()
@@ -317,6 +420,7 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
             events: summary.events,
             object_event_share: summary.object_event_share,
             on_event_share: summary.on_event_share,
+            events_per_window: summary.events_per_window,
             object_count: summary.object_count,
             renders: summary.renders,
             wall_s: summary.wall_s,
@@ -343,11 +447,15 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
         generator: format!("evgate {}", env!("CARGO_PKG_VERSION")),
         scale: args.scale,
         totals,
+        photographs: photograph_files,
         sequences: entries,
     };
     let path = args.out.join("manifest.json");
     fs::write(&path, serde_json::to_string_pretty(&manifest)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
+    if let Some(reference) = &args.verify {
+        verify_against(&manifest, reference)?;
+    }
     let totals = &manifest.totals;
     if args.json {
         println!("{}", serde_json::to_string_pretty(totals)?);
@@ -367,6 +475,76 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The SHA-256 of each file named in the manifest at `path` (sequence files and photographs).
+fn reference_hashes(path: &Path) -> anyhow::Result<std::collections::BTreeMap<String, String>> {
+    let text = fs::read_to_string(path)
+        .with_context(|| format!("--verify {}: cannot read the manifest", path.display()))?;
+    let manifest: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("--verify {}: not a suite manifest", path.display()))?;
+    let mut hashes = std::collections::BTreeMap::new();
+    let sequences = manifest["sequences"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    let files = sequences
+        .iter()
+        .flat_map(|entry| entry["files"].as_array().cloned().unwrap_or_default())
+        .map(|file| (file, ""))
+        .chain(
+            manifest["photographs"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default()
+                .into_iter()
+                .map(|file| (file, "photograph ")),
+        );
+    for (file, kind) in files {
+        if let (Some(name), Some(sha)) = (file["path"].as_str(), file["sha256"].as_str()) {
+            hashes.insert(format!("{kind}{name}"), sha.to_owned());
+        }
+    }
+    Ok(hashes)
+}
+
+/// Fails unless every file this run wrote has the SHA-256 the reference manifest gives it.
+fn verify_against(manifest: &Manifest, reference: &Path) -> anyhow::Result<()> {
+    let expected = reference_hashes(reference)?;
+    let generated = manifest
+        .sequences
+        .iter()
+        .flat_map(|entry| entry.files.iter().map(|file| (String::new(), file)))
+        .chain(
+            manifest
+                .photographs
+                .iter()
+                .map(|file| ("photograph ".to_owned(), file)),
+        );
+    let mut differences = Vec::new();
+    let mut checked = 0;
+    for (kind, file) in generated {
+        let name = format!("{kind}{}", file.path.display());
+        checked += 1;
+        match expected.get(&name) {
+            Some(sha) if *sha == file.sha256 => {}
+            Some(sha) => differences.push(format!("{name}: {} here, {sha} there", file.sha256)),
+            None => differences.push(format!("{name}: not in {}", reference.display())),
+        }
+    }
+    if !differences.is_empty() {
+        anyhow::bail!(
+            "--verify {}: {} of {checked} files differ:\n{}",
+            reference.display(),
+            differences.len(),
+            differences.join("\n")
+        );
+    }
+    println!(
+        "verified: all {checked} files match the SHA-256 of {}",
+        reference.display()
+    );
+    Ok(())
+}
+
 /// Size and SHA-256 of a generated file, its path relative to the suite root.
 fn describe_file(path: &Path, root: &Path) -> anyhow::Result<ManifestFile> {
     use sha2::{Digest, Sha256};
@@ -381,4 +559,85 @@ fn describe_file(path: &Path, root: &Path) -> anyhow::Result<ManifestFile> {
         bytes,
         sha256: digest.iter().map(|b| format!("{b:02x}")).collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use evgate_core::Event;
+
+    #[test]
+    fn window_counts_cover_every_window_including_empty_ones() {
+        let events: Vec<Event> = [1_000, 2_000, 60_000, 149_999]
+            .iter()
+            .map(|&t| Event::new(t, 0, 0, true))
+            .collect();
+        let counts = WindowCounts::of(&events, 200_000, 50_000);
+        assert_eq!(
+            counts,
+            WindowCounts {
+                window_ms: 50,
+                min: 0,
+                median: 1,
+                max: 2
+            }
+        );
+    }
+
+    #[test]
+    fn verification_names_every_file_whose_hash_differs() {
+        let dir = tempfile::tempdir().unwrap();
+        let manifest = Manifest {
+            version: SUITE_VERSION,
+            generator: "test".to_owned(),
+            scale: SuiteScale::Small,
+            totals: SuiteTotals {
+                sequences: 0,
+                simulated_s: 0.0,
+                events: 0,
+                bytes: 0,
+                wall_s: 0.0,
+            },
+            photographs: vec![ManifestFile {
+                path: PathBuf::from("moon.png"),
+                bytes: 3,
+                sha256: "aa".to_owned(),
+            }],
+            sequences: Vec::new(),
+        };
+        let reference = dir.path().join("manifest.json");
+        let write = |sha: &str| {
+            let text = format!(
+                "{{\"photographs\": [{{\"path\": \"moon.png\", \"sha256\": \"{sha}\"}}], \"sequences\": []}}"
+            );
+            fs::write(&reference, text).unwrap();
+        };
+        write("aa");
+        verify_against(&manifest, &reference).unwrap();
+        write("bb");
+        let error = verify_against(&manifest, &reference)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("photograph moon.png: aa here, bb there"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_split_lists_the_accepted_ones() {
+        let error = parse_split("holdout").unwrap_err();
+        assert!(error.contains("train, val, test, test-ood"), "{error}");
+        assert_eq!(parse_split("test-ood"), Ok(Split::TestOod));
+    }
+
+    #[test]
+    fn a_folder_without_photographs_is_refused_with_the_fix() {
+        let dir = tempfile::tempdir().unwrap();
+        let error = format!("{:#}", photographs_in(dir.path()).unwrap_err());
+        assert!(error.contains("scripts/fetch-photos.sh"), "{error}");
+        let missing = dir.path().join("none");
+        let error = format!("{:#}", photographs_in(&missing).unwrap_err());
+        assert!(error.contains("--photos"), "{error}");
+    }
 }
