@@ -103,8 +103,8 @@ fn in_domain_sensor(rng: &mut impl Rng, base: &EventModel) -> EventModel {
 
 fn out_of_domain_sensor(rng: &mut impl Rng, base: &EventModel) -> EventModel {
     EventModel {
-        threshold_on: either(rng, 0.07..0.11, 0.38..0.55),
-        threshold_off: either(rng, 0.07..0.11, 0.38..0.55),
+        threshold_on: either(rng, 0.09..0.115, 0.38..0.55),
+        threshold_off: either(rng, 0.09..0.115, 0.38..0.55),
         threshold_sigma: rng.gen_range(0.065..0.1),
         refractory_us: if rng.gen_bool(0.5) {
             rng.gen_range(20..90)
