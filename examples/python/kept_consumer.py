@@ -87,6 +87,11 @@ def evgate_iceoryx_config():
             f"refusing the iceoryx2 root {root}: it must be a directory of user {uid} with mode 0700 "
             f"(found owner {info.st_uid}, mode {stat.S_IMODE(info.st_mode):04o})"
         )
+    written = os.path.join(root, "iceoryx2.toml")
+    if os.path.isfile(written):
+        # The services wrote their configuration there; making it the process-wide one keeps
+        # iceoryx2 from looking for config files where it takes none (dead-node cleanup).
+        return iox2.config.setup_global_config_from_file(iox2.FilePath.new(written))
     config = iox2.config.default()
     config.global_cfg.root_path = iox2.Path.new(root + "/")
     config.global_cfg.prefix = iox2.FileName.new(f"evgate{uid}_")

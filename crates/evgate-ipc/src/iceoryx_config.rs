@@ -12,6 +12,11 @@
 //! this user's (`evgate<uid>_`): pipelines of different users never meet there, and evgate's
 //! stale-resource cleanup touches no other application's files. Any consumer has to use the same
 //! two settings (`examples/python/kept_consumer.py` does).
+//!
+//! iceoryx2 still reads its process-wide configuration in places that take none (cleaning up
+//! a dead node whose details are gone), and would look for files there. So the configuration is
+//! also written to `<root>/iceoryx2.toml` and installed as iceoryx2's global one before any
+//! node exists.
 
 use std::fs::DirBuilder;
 use std::io::ErrorKind;
@@ -54,6 +59,18 @@ pub enum SharedMemoryRootError {
     OpenToOthers { path: PathBuf, mode: u32 },
     #[error("the iceoryx2 root {path} is not a path iceoryx2 accepts: {reason}")]
     Rejected { path: PathBuf, reason: String },
+    #[error("cannot write evgate's iceoryx2 configuration {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("iceoryx2 refuses evgate's configuration {path}: {reason}")]
+    Install { path: PathBuf, reason: String },
+    #[error(
+        "iceoryx2's process-wide configuration was loaded before evgate's (root {found}); \
+         create evgate's nodes before any other iceoryx2 call"
+    )]
+    LoadedTooEarly { found: String },
 }
 
 fn current_user() -> u32 {
@@ -150,7 +167,47 @@ pub fn config_with_root(root: &Path) -> Result<Config, SharedMemoryRootError> {
     Ok(config)
 }
 
-/// evgate's iceoryx2 configuration for this process: its root prepared and checked once.
+/// Writes `config` to `<root>/iceoryx2.toml` (through a file of this process, renamed into
+/// place, so concurrent starts never read half a file) and installs it as iceoryx2's
+/// process-wide configuration.
+fn install_globally(config: &Config, root: &Path) -> Result<(), SharedMemoryRootError> {
+    let path = root.join("iceoryx2.toml");
+    let write_error = |source| SharedMemoryRootError::Write {
+        path: path.clone(),
+        source,
+    };
+    let text = toml::to_string(config).map_err(|error| SharedMemoryRootError::Install {
+        path: path.clone(),
+        reason: error.to_string(),
+    })?;
+    let scratch = root.join(format!(".iceoryx2.toml.{}", std::process::id()));
+    std::fs::write(&scratch, text).map_err(write_error)?;
+    std::fs::rename(&scratch, &path).map_err(write_error)?;
+    let file =
+        iceoryx2::prelude::FilePath::new(path.as_os_str().as_encoded_bytes()).map_err(|error| {
+            SharedMemoryRootError::Install {
+                path: path.clone(),
+                reason: format!("{error:?}"),
+            }
+        })?;
+    let installed = Config::setup_global_config_from_file(&file).map_err(|error| {
+        SharedMemoryRootError::Install {
+            path: path.clone(),
+            reason: format!("{error:?}"),
+        }
+    })?;
+    if installed.global.root_path() != config.global.root_path()
+        || installed.global.prefix != config.global.prefix
+    {
+        return Err(SharedMemoryRootError::LoadedTooEarly {
+            found: installed.global.root_path().to_string(),
+        });
+    }
+    Ok(())
+}
+
+/// evgate's iceoryx2 configuration for this process: its root prepared and checked once, and
+/// installed as iceoryx2's process-wide configuration.
 pub fn evgate_config() -> Result<&'static Config, SharedMemoryRootError> {
     static CONFIG: OnceLock<Config> = OnceLock::new();
     if let Some(config) = CONFIG.get() {
@@ -159,6 +216,7 @@ pub fn evgate_config() -> Result<&'static Config, SharedMemoryRootError> {
     let root = root_directory();
     prepare_root(&root)?;
     let config = config_with_root(&root)?;
+    install_globally(&config, &root)?;
     Ok(CONFIG.get_or_init(|| config))
 }
 
@@ -263,6 +321,17 @@ mod tests {
             .service_dir()
             .to_string()
             .starts_with(dir.path().to_str().unwrap()));
+    }
+
+    #[test]
+    fn iceoryx2s_process_wide_configuration_is_evgates() {
+        let ours = evgate_config().unwrap();
+        let global = Config::global_config();
+        assert_eq!(global.global.root_path(), ours.global.root_path());
+        assert_eq!(global.global.prefix, ours.global.prefix);
+        let file = root_directory().join("iceoryx2.toml");
+        let written = std::fs::read_to_string(&file).unwrap();
+        assert!(written.contains(&file_prefix()), "{written}");
     }
 
     #[test]
