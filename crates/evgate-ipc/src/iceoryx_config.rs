@@ -22,7 +22,7 @@ use std::fs::DirBuilder;
 use std::io::ErrorKind;
 use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, SemanticString};
@@ -210,6 +210,15 @@ fn install_globally(config: &Config, root: &Path) -> Result<(), SharedMemoryRoot
 /// installed as iceoryx2's process-wide configuration.
 pub fn evgate_config() -> Result<&'static Config, SharedMemoryRootError> {
     static CONFIG: OnceLock<Config> = OnceLock::new();
+    // One thread prepares and installs; the others wait for it (they would share its scratch
+    // file, named after the process).
+    static PREPARING: Mutex<()> = Mutex::new(());
+    if let Some(config) = CONFIG.get() {
+        return Ok(config);
+    }
+    let _preparing = PREPARING
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some(config) = CONFIG.get() {
         return Ok(config);
     }
@@ -332,6 +341,16 @@ mod tests {
         let file = root_directory().join("iceoryx2.toml");
         let written = std::fs::read_to_string(&file).unwrap();
         assert!(written.contains(&file_prefix()), "{written}");
+    }
+
+    #[test]
+    fn threads_starting_together_all_get_the_configuration() {
+        let handles: Vec<_> = (0..8)
+            .map(|_| std::thread::spawn(|| evgate_config().map(|c| c.global.prefix)))
+            .collect();
+        for handle in handles {
+            assert_eq!(handle.join().unwrap().unwrap().to_string(), file_prefix());
+        }
     }
 
     #[test]
