@@ -6,7 +6,7 @@ use crate::bootstrap::{Interval, MethodIntervals, Metric};
 use crate::method::MethodKind;
 use crate::model_tables::model_tables;
 use crate::recording::GroundTruth;
-use crate::report::Report;
+use crate::report::{PresetResult, Report};
 use crate::summary::{HorizonSummary, MethodSummary};
 
 pub(crate) fn percent(value: Option<f64>) -> String {
@@ -101,31 +101,36 @@ fn iou_and_recall_cell(
     )
 }
 
+/// One value per preset column, then the "all" column's.
+fn per_column<'a, T>(
+    report: &'a Report,
+    preset: impl Fn(&'a PresetResult) -> Option<&'a T>,
+    all: Option<&'a T>,
+) -> Vec<Option<&'a T>> {
+    report.presets.iter().map(preset).chain([all]).collect()
+}
+
 /// The intervals of `method` per preset column and for "all", as [`method_summaries`].
 pub(crate) fn method_intervals<'a>(
     report: &'a Report,
     method: &str,
 ) -> Vec<Option<&'a MethodIntervals>> {
-    let mut intervals: Vec<Option<&MethodIntervals>> = report
-        .presets
-        .iter()
-        .map(|p| p.intervals.get(method))
-        .collect();
-    intervals.push(report.intervals.get(method));
-    intervals
+    per_column(
+        report,
+        |p| p.intervals.get(method),
+        report.intervals.get(method),
+    )
 }
 
 pub(crate) fn method_summaries<'a>(
     report: &'a Report,
     method: &str,
 ) -> Vec<Option<&'a MethodSummary>> {
-    let mut summaries: Vec<Option<&MethodSummary>> = report
-        .presets
-        .iter()
-        .map(|p| p.methods.get(method))
-        .collect();
-    summaries.push(report.overall.get(method));
-    summaries
+    per_column(
+        report,
+        |p| p.methods.get(method),
+        report.overall.get(method),
+    )
 }
 
 /// The whole report as Markdown; `plots` are the file names of the figures written beside it.

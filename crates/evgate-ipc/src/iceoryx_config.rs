@@ -169,8 +169,11 @@ pub fn config_with_root(root: &Path) -> Result<Config, SharedMemoryRootError> {
 
 /// Writes `config` to `<root>/iceoryx2.toml` (through a file of this process, renamed into
 /// place, so concurrent starts never read half a file) and installs it as iceoryx2's
-/// process-wide configuration.
-fn install_globally(config: &Config, root: &Path) -> Result<(), SharedMemoryRootError> {
+/// process-wide configuration, which it returns.
+fn install_globally(
+    config: &Config,
+    root: &Path,
+) -> Result<&'static Config, SharedMemoryRootError> {
     let path = root.join("iceoryx2.toml");
     let write_error = |source| SharedMemoryRootError::Write {
         path: path.clone(),
@@ -203,30 +206,29 @@ fn install_globally(config: &Config, root: &Path) -> Result<(), SharedMemoryRoot
             found: installed.global.root_path().to_string(),
         });
     }
-    Ok(())
+    Ok(installed)
 }
 
 /// evgate's iceoryx2 configuration for this process: its root prepared and checked once, and
 /// installed as iceoryx2's process-wide configuration.
 pub fn evgate_config() -> Result<&'static Config, SharedMemoryRootError> {
-    static CONFIG: OnceLock<Config> = OnceLock::new();
+    static CONFIG: OnceLock<&'static Config> = OnceLock::new();
     // One thread prepares and installs; the others wait for it (they would share its scratch
     // file, named after the process).
     static PREPARING: Mutex<()> = Mutex::new(());
     if let Some(config) = CONFIG.get() {
-        return Ok(config);
+        return Ok(*config);
     }
     let _preparing = PREPARING
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some(config) = CONFIG.get() {
-        return Ok(config);
+        return Ok(*config);
     }
     let root = root_directory();
     prepare_root(&root)?;
-    let config = config_with_root(&root)?;
-    install_globally(&config, &root)?;
-    Ok(CONFIG.get_or_init(|| config))
+    let installed = install_globally(&config_with_root(&root)?, &root)?;
+    Ok(*CONFIG.get_or_init(|| installed))
 }
 
 #[cfg(test)]

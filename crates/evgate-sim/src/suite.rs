@@ -41,11 +41,6 @@ impl Split {
     /// Every split, in generation order.
     pub const ALL: [Split; 4] = [Split::Train, Split::Val, Split::Test, Split::TestOod];
 
-    /// The split called `name`.
-    pub fn from_name(name: &str) -> Option<Split> {
-        Split::ALL.into_iter().find(|split| split.name() == name)
-    }
-
     /// Seeds of a split start here; presets take consecutive blocks of 1000 within it.
     fn seed_base(self) -> u64 {
         match self {
@@ -54,6 +49,22 @@ impl Split {
             Split::Test => 300_000,
             Split::TestOod => 400_000,
         }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("unknown split {name:?}; accepted: train, val, test, test-ood")]
+pub struct UnknownSplit {
+    pub name: String,
+}
+
+impl FromStr for Split {
+    type Err = UnknownSplit;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Split::ALL
+            .into_iter()
+            .find(|split| split.name() == s)
+            .ok_or_else(|| UnknownSplit { name: s.to_owned() })
     }
 }
 
@@ -239,6 +250,16 @@ mod tests {
                 "{}",
                 entry.name
             );
+        }
+    }
+
+    #[test]
+    fn an_unknown_split_lists_the_accepted_ones() {
+        let error = "holdout".parse::<Split>().unwrap_err().to_string();
+        assert!(error.contains("train, val, test, test-ood"), "{error}");
+        assert_eq!("test-ood".parse::<Split>().unwrap(), Split::TestOod);
+        for split in Split::ALL {
+            assert_eq!(split.name().parse::<Split>().unwrap(), split);
         }
     }
 

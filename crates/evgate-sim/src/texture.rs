@@ -456,9 +456,9 @@ fn flatten_regions(texels: &mut [f32], size: usize, share: f32, rng: &mut impl R
     }
     let mut field = vec![0.0f32; size * size];
     add_value_noise_octaves(&mut field, size, 1.0, 4, 8, rng);
-    let mut sorted = field.clone();
-    sorted.sort_by(f32::total_cmp);
-    let cut = sorted[((1.0 - share.min(1.0)) * (sorted.len() - 1) as f32) as usize];
+    let mut ranked = field.clone();
+    let rank = ((1.0 - share.min(1.0)) * (ranked.len() - 1) as f32) as usize;
+    let (_, &mut cut, _) = ranked.select_nth_unstable_by(rank, f32::total_cmp);
     let soft = 0.05;
     let level = texels.iter().sum::<f32>() / texels.len() as f32;
     for (texel, &f) in texels.iter_mut().zip(&field) {

@@ -266,10 +266,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
 
 /// The sequences of one split: SUITE/SPLIT/<name>/sequence.npz and SUITE/SPLIT/*.npz, sorted.
 fn split_sequences(suite: &Path, split: &str) -> anyhow::Result<Vec<PathBuf>> {
-    if evgate_sim::Split::from_name(split).is_none() {
-        let accepted: Vec<&str> = evgate_sim::Split::ALL.iter().map(|s| s.name()).collect();
-        bail!("unknown split {split:?}; accepted: {}", accepted.join(", "));
-    }
+    split.parse::<evgate_sim::Split>()?;
     let folder = suite.join(split);
     let entries = fs::read_dir(&folder).with_context(|| {
         format!(
