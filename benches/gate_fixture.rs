@@ -39,13 +39,15 @@ pub fn left_columns_mask(columns: u16) -> BitMask {
     mask
 }
 
-/// A forecast at the reference time whose masks (now and at every horizon) are all `mask`.
-pub fn forecast(mask: &BitMask) -> (ForecastHeader, Vec<u64>) {
+/// A forecast for stream `stream_id` at the reference time whose masks (now and at every
+/// horizon) are all `mask`.
+pub fn forecast(mask: &BitMask, stream_id: u64) -> (ForecastHeader, Vec<u64>) {
     let mut header = ForecastHeader {
+        source_stream_id: stream_id,
         reference_time_us: REFERENCE_US,
         window_start_us: REFERENCE_US - 50_000,
         horizon_count: HORIZONS_US.len() as u32,
-        words_per_mask: words_for(SENSOR) as u32,
+        words_per_mask: words_for(SENSOR.pixels()) as u32,
         width: SENSOR.width,
         height: SENSOR.height,
         ..Default::default()

@@ -1,12 +1,16 @@
-//! End-to-end latency of the gate over shared memory, next to a raw echo of the same payload.
+//! End-to-end latency of the gate over shared memory, next to a raw echo of the same payload,
+//! under both wait strategies.
 //!
 //! For batches of 1 k, 10 k and 100 k events: publish a batch on `<domain>/cam/events`, wait
-//! (on the wake-up listener) until the batch comes back on `.../kept`, and record
-//! published → received from the batch header's CLOCK_MONOTONIC stamp. Two peers do the
-//! middle hop in separate processes: the real `evgate-gate` (a forecast whose masks keep every
-//! event, so the output is as large as the input) and a raw echo (this executable with
-//! `--echo`: the same ports, the batch copied through without gating). The gating kernel
-//! (`ForecastView::keep_bitmap`) is timed on the same batch in this process.
+//! until the batch comes back on `.../kept`, and record published → received from the batch
+//! header's CLOCK_MONOTONIC stamp (a round trip: two shared-memory hops and the peer's work).
+//! Two peers do the middle hop in separate processes: the real `evgate-gate` (a forecast whose
+//! masks keep every event, so the output is as large as the input) and a raw echo (this
+//! executable with `--echo`: the same ports, the batch copied through without gating). Each
+//! runs under `--wait event` (both sides sleep until notified) and `--wait busy-poll` (both
+//! sides poll without sleeping), with this process pinned to CPU 0 and the peer to CPU 1. The
+//! gate's production judge (`evgate_core::Judge` and the selection of the kept events) is timed
+//! on the same batch in this process.
 //!
 //! `cargo bench -p evgate-benches --bench ipc_latency -- --out target/bench/ipc_latency.json`
 
@@ -14,11 +18,13 @@ mod gate_fixture;
 
 use std::time::{Duration, Instant};
 
-use evgate_core::{words_for, Event, ForecastView, GateMode};
+use evgate_core::{
+    words_for, Event, Forecast, ForecastView, GateMode, Judge, MaskView, NoForecast, Policy,
+};
 use evgate_e2e::{binary, unique_names, wait_until, workspace_root, Process};
 use evgate_ipc::{
-    clock, create_node, BatchHeader, ForecastHeader, PipelineNames, Qos, SlicePublisher,
-    SliceSubscriber, Stream,
+    clock, create_node, pin_current_thread, Backoff, BatchHeader, ForecastHeader, PipelineNames,
+    Qos, SlicePublisher, SliceSubscriber, Stream, WaitStrategy,
 };
 use gate_fixture::{
     flag_value, forecast, left_columns_mask, random_batch, write_report, BenchResult, HORIZONS_US,
@@ -28,29 +34,53 @@ use serde_json::json;
 
 const TIMEOUT: Duration = Duration::from_secs(60);
 
+/// The CPUs of this process and of the peer.
+const BENCH_CPU: usize = 0;
+const PEER_CPU: usize = 1;
+
+/// The stream id of the bench's batches, which its forecast names.
+const STREAM_ID: u64 = 1;
+
+const STRATEGIES: [WaitStrategy; 2] = [WaitStrategy::Event, WaitStrategy::BusyPoll];
+
 fn main() -> BenchResult<()> {
     if let Some(domain) = flag_value("--echo") {
-        return echo(&PipelineNames::new(&domain, "cam")?);
+        let strategy = match flag_value("--wait").as_deref() {
+            Some("busy-poll") => WaitStrategy::BusyPoll,
+            _ => WaitStrategy::Event,
+        };
+        pin_current_thread(PEER_CPU)?;
+        return echo(&PipelineNames::new(&domain, "cam")?, strategy);
     }
     // cargo runs benches in the package directory; relative paths mean the workspace root.
     let out = workspace_root()
         .join(flag_value("--out").unwrap_or_else(|| "target/bench/ipc_latency.json".to_owned()));
+    pin_current_thread(BENCH_CPU)?;
     let mut results = Vec::new();
     for (size, iterations) in [(1_000, 3_000), (10_000, 2_000), (100_000, 500)] {
         let events = random_batch(size, size as u64);
-        let gate = measure_peer(Peer::Gate, &events, iterations)?;
-        let raw = measure_peer(Peer::RawEcho, &events, iterations)?;
         let kernel = kernel_times(&events, iterations.min(1_000));
         let kernel_p50 = percentile(&kernel, 0.5);
-        let budget_p99 = 2.0 * (percentile(&raw, 0.99) + kernel_p50);
+        let mut by_strategy = serde_json::Map::new();
+        for strategy in STRATEGIES {
+            let gate = measure_peer(Peer::Gate, strategy, &events, iterations)?;
+            let raw = measure_peer(Peer::RawEcho, strategy, &events, iterations)?;
+            let budget_p99 = 2.0 * (percentile(&raw, 0.99) + kernel_p50);
+            by_strategy.insert(
+                flag(strategy),
+                json!({
+                    "gate-us": summary(&gate),
+                    "raw-echo-us": summary(&raw),
+                    "target-p99-us (2 x (raw p99 + kernel p50))": budget_p99,
+                    "gate-p99-within-target": percentile(&gate, 0.99) <= budget_p99,
+                }),
+            );
+        }
         let result = json!({
             "batch-events": size,
             "iterations": iterations,
-            "gate-us": summary(&gate),
-            "raw-echo-us": summary(&raw),
             "gating-kernel-us": summary(&kernel),
-            "target-p99-us (2 x (raw p99 + kernel p50))": budget_p99,
-            "gate-p99-within-target": percentile(&gate, 0.99) <= budget_p99,
+            "wait": by_strategy,
         });
         eprintln!("{result}");
         results.push(result);
@@ -58,9 +88,18 @@ fn main() -> BenchResult<()> {
     let report = json!({
         "bench": "ipc_latency",
         "machine": machine(),
+        "cpus": {"bench": BENCH_CPU, "peer": PEER_CPU},
         "results": results,
     });
     write_report(&out, &report)
+}
+
+fn flag(strategy: WaitStrategy) -> String {
+    match strategy {
+        WaitStrategy::Event => "event",
+        WaitStrategy::BusyPoll => "busy-poll",
+    }
+    .to_owned()
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -71,11 +110,16 @@ enum Peer {
 
 /// A forecast whose masks cover the whole sensor: every event is judged and kept.
 fn full_sensor_forecast() -> (ForecastHeader, Vec<u64>) {
-    forecast(&left_columns_mask(SENSOR.width))
+    forecast(&left_columns_mask(SENSOR.width), STREAM_ID)
 }
 
 /// Round trips through `peer`, in microseconds.
-fn measure_peer(peer: Peer, events: &[Event], iterations: usize) -> BenchResult<Vec<f64>> {
+fn measure_peer(
+    peer: Peer,
+    strategy: WaitStrategy,
+    events: &[Event],
+    iterations: usize,
+) -> BenchResult<Vec<f64>> {
     let names = unique_names("latency");
     let node = create_node("ipc-latency-bench")?;
     let qos = Qos {
@@ -90,7 +134,7 @@ fn measure_peer(peer: Peer, events: &[Event], iterations: usize) -> BenchResult<
         Stream::Forecast,
         &Qos::default(),
     )?;
-    let _peer = start_peer(peer, &names)?;
+    let _peer = start_peer(peer, strategy, &names)?;
     wait_until("the peer subscribing", TIMEOUT, || {
         input.subscriber_count() == 1
     })?;
@@ -105,7 +149,7 @@ fn measure_peer(peer: Peer, events: &[Event], iterations: usize) -> BenchResult<
     let mut latencies = Vec::with_capacity(iterations);
     for sequence in 0..(warmup + iterations) as u64 {
         let header = BatchHeader {
-            stream_id: 1,
+            stream_id: STREAM_ID,
             sequence,
             first_event_index: sequence * events.len() as u64,
             event_count: events.len() as u64,
@@ -117,7 +161,7 @@ fn measure_peer(peer: Peer, events: &[Event], iterations: usize) -> BenchResult<
             flags: 0,
         };
         input.publish(header, events)?;
-        let received_ns = receive_one(&output, events.len())?;
+        let received_ns = receive_one(&output, strategy, events.len())?;
         if sequence as usize >= warmup {
             latencies.push((received_ns - header.published_at_monotonic_ns) as f64 / 1e3);
         }
@@ -125,9 +169,15 @@ fn measure_peer(peer: Peer, events: &[Event], iterations: usize) -> BenchResult<
     Ok(latencies)
 }
 
-/// Sleeps on the wake-up listener until the echoed batch arrives; returns the arrival time.
-fn receive_one(output: &SliceSubscriber<Event, BatchHeader>, expected: usize) -> BenchResult<u64> {
+/// Waits for the echoed batch (asleep on the wake-up listener, or polling); returns the arrival
+/// time.
+fn receive_one(
+    output: &SliceSubscriber<Event, BatchHeader>,
+    strategy: WaitStrategy,
+    expected: usize,
+) -> BenchResult<u64> {
     let deadline = Instant::now() + TIMEOUT;
+    let mut backoff = Backoff::default();
     loop {
         if let Some(sample) = output.receive()? {
             let now = clock::monotonic_ns();
@@ -143,13 +193,20 @@ fn receive_one(output: &SliceSubscriber<Event, BatchHeader>, expected: usize) ->
         if Instant::now() >= deadline {
             return Err("the peer did not return the batch within 60 s".into());
         }
-        output
-            .listener()
-            .timed_wait(|_| {}, Duration::from_millis(100))?;
+        match strategy {
+            WaitStrategy::Event => {
+                output
+                    .listener()
+                    .timed_wait(|_| {}, Duration::from_millis(100))?;
+            }
+            WaitStrategy::BusyPoll => backoff.idle(),
+        }
     }
 }
 
-fn start_peer(peer: Peer, names: &PipelineNames) -> BenchResult<Process> {
+fn start_peer(peer: Peer, strategy: WaitStrategy, names: &PipelineNames) -> BenchResult<Process> {
+    let wait = flag(strategy);
+    let cpu = PEER_CPU.to_string();
     Ok(match peer {
         Peer::Gate => Process::start(
             &binary("evgate-gate")?,
@@ -164,55 +221,79 @@ fn start_peer(peer: Peer, names: &PipelineNames) -> BenchResult<Process> {
                 "drop",
                 "--stats-interval-ms",
                 "1000",
+                "--wait",
+                &wait,
+                "--cpu",
+                &cpu,
             ],
         )?,
-        Peer::RawEcho => Process::start(&std::env::current_exe()?, &["--echo", &names.domain])?,
+        Peer::RawEcho => Process::start(
+            &std::env::current_exe()?,
+            &["--echo", &names.domain, "--wait", &wait],
+        )?,
     })
 }
 
 /// The raw peer: copies every batch from the events stream to the kept stream.
-fn echo(names: &PipelineNames) -> BenchResult<()> {
+fn echo(names: &PipelineNames, strategy: WaitStrategy) -> BenchResult<()> {
     let node = create_node("ipc-latency-echo")?;
     let input =
         SliceSubscriber::<Event, BatchHeader>::open(&node, names, Stream::Events, &Qos::default())?;
     let output =
         SlicePublisher::<Event, BatchHeader>::open(&node, names, Stream::Kept, &Qos::default())?;
+    let mut backoff = Backoff::default();
     loop {
-        input.clear_wakeups();
+        let mut echoed = false;
         while let Some(sample) = input.receive()? {
             output.publish(*sample.user_header(), sample.payload())?;
+            echoed = true;
         }
         // The bench kills this process when done; SIGTERM/SIGINT end the wait too.
-        if input
-            .listener()
-            .timed_wait(|_| {}, Duration::from_millis(100))
-            .is_err()
-        {
-            return Ok(());
+        match strategy {
+            WaitStrategy::Event => {
+                input.clear_wakeups();
+                if input
+                    .listener()
+                    .timed_wait(|_| {}, Duration::from_millis(100))
+                    .is_err()
+                {
+                    return Ok(());
+                }
+            }
+            WaitStrategy::BusyPoll if echoed => backoff.reset(),
+            WaitStrategy::BusyPoll => backoff.idle(),
         }
     }
 }
 
-/// The gate's kernel on the same batch, microseconds per call.
+/// The gate's judge and the selection of the kept events on the same batch, microseconds per
+/// call.
 fn kernel_times(events: &[Event], iterations: usize) -> Vec<f64> {
     let (_, words) = full_sensor_forecast();
-    let per_mask = words_for(SENSOR);
-    let view = ForecastView::new(REFERENCE_US, &HORIZONS_US, SENSOR, &words[per_mask..])
-        .expect("valid forecast");
-    let mut keep = vec![0u64; events.len().div_ceil(64)];
-    let mut judged = vec![0u64; events.len().div_ceil(64)];
+    let per_mask = words_for(SENSOR.pixels());
+    let forecast = Forecast {
+        current: MaskView::new(SENSOR, &words[..per_mask]).expect("valid mask"),
+        horizons: ForecastView::new(REFERENCE_US, &HORIZONS_US, SENSOR, &words[per_mask..])
+            .expect("valid forecast"),
+    };
+    let policy = Policy {
+        no_forecast: NoForecast::Drop,
+        last_mask_max_age: Duration::from_millis(200),
+    };
+    let mut judge = Judge::default();
+    let mut kept = Vec::with_capacity(events.len());
     (0..iterations)
         .map(|_| {
             let start = Instant::now();
-            let counts = view
-                .keep_bitmap(
-                    std::hint::black_box(events),
-                    GateMode::KeepMovingObjects,
-                    &mut keep,
-                    &mut judged,
-                )
-                .expect("bitmaps sized for the batch");
-            std::hint::black_box(counts);
+            let verdict = judge.judge(
+                std::hint::black_box(events),
+                Some(forecast),
+                GateMode::KeepMovingObjects,
+                policy,
+            );
+            kept.clear();
+            judge.select(events, true, &mut kept);
+            std::hint::black_box((verdict, &kept));
             start.elapsed().as_secs_f64() * 1e6
         })
         .collect()

@@ -27,6 +27,9 @@ use gate_fixture::{
 };
 use serde_json::json;
 
+/// The stream id of the bench's batches, which its forecast names.
+const STREAM_ID: u64 = 3;
+
 const TIMEOUT: Duration = Duration::from_secs(120);
 
 fn main() -> BenchResult<()> {
@@ -49,7 +52,7 @@ fn main() -> BenchResult<()> {
 }
 
 fn half_sensor_forecast() -> (ForecastHeader, Vec<u64>) {
-    forecast(&left_columns_mask(SENSOR.width / 2))
+    forecast(&left_columns_mask(SENSOR.width / 2), STREAM_ID)
 }
 
 fn sustained_throughput(total_events: u64, batch_events: usize) -> BenchResult<serde_json::Value> {
@@ -98,7 +101,7 @@ fn sustained_throughput(total_events: u64, batch_events: usize) -> BenchResult<s
         let last = sequence == batches;
         let payload: &[Event] = if last { &[] } else { &events };
         let header = BatchHeader {
-            stream_id: 3,
+            stream_id: STREAM_ID,
             sequence,
             first_event_index: sequence * batch_events as u64,
             event_count: payload.len() as u64,

@@ -7,7 +7,7 @@ mod uniform_events;
 
 use criterion::measurement::Measurement;
 use criterion::{black_box, BenchmarkId, Criterion, Throughput};
-use evgate_core::{Event, SensorSize, TimeSpan, TimeWindow, VoxelGrid, WindowsByDuration};
+use evgate_core::{events_in, Event, SensorSize, TimeSpan, VoxelGrid};
 use uniform_events::{uniform_events, EVENTS, WINDOW_US};
 
 /// Real recordings, relative to this package's manifest (shared/ sits beside the repository).
@@ -46,12 +46,15 @@ impl Recording {
             let span = TimeSpan::new(first, last.max(first + 1)).expect("span is non-empty");
             vec![(span, 0, events.len())]
         } else {
+            // Consecutive 50 ms windows from the first event, as the inference service cuts them.
             let mut next_first = 0;
-            WindowsByDuration::new(&events, first, WINDOW_US)
-                .unwrap_or_else(|error| panic!("{path}: {error}"))
-                .map(|TimeWindow { span, events }| {
-                    let window = (span, next_first, events.len());
-                    next_first += events.len();
+            (0..=(last - first) / WINDOW_US)
+                .map(|k| {
+                    let span = TimeSpan::new(first + k * WINDOW_US, first + (k + 1) * WINDOW_US)
+                        .expect("span is non-empty");
+                    let count = events_in(&events, span).len();
+                    let window = (span, next_first, count);
+                    next_first += count;
                     window
                 })
                 .collect()

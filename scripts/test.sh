@@ -24,10 +24,11 @@ cargo clippy --workspace --all-targets --features evgate/dsec -- -D warnings
 echo "== fuzz: every target for ${EVGATE_FUZZ_SECONDS:-20} s from its committed seeds"
 bash scripts/fuzz-smoke.sh
 echo "== cargo build of the binaries the end-to-end tests start"
-# The same command as SERVICE_PACKAGES in tests/lib.rs: the tests' own build then finds them fresh
+# The same commands as SERVICE_PACKAGES and EXAMPLES_PACKAGE in tests/lib.rs: the tests' own build then finds them fresh
 # and never compiles or runs a build script from inside a test.
 cargo build --bins -p evgate -p evgate-gate -p evgate-infer -p evgate-ingest
+cargo build --examples -p evgate-examples
 echo "== cargo test"
 cargo test --workspace --features evgate/dsec
-echo "== pytest (models/training, scripts)"
-models/training/.venv/bin/python -m pytest -q models/training/tests scripts/tests
+echo "== pytest (models/training, tools)"
+models/training/.venv/bin/python -m pytest -q models/training/tests tools/tests

@@ -6,17 +6,18 @@ use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStderr, Command, ExitStatus, Stdio};
+use std::process::{ChildStderr, Command, ExitStatus};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::{Duration, Instant};
 
 use evgate_ipc::PipelineNames;
+use evgate_supervise::{StderrTo, Supervised};
 
 /// Harness failures. Their `Debug` is their message, so `unwrap()` prints the children's report
 /// readably.
 #[derive(thiserror::Error)]
 pub enum HarnessError {
-    #[error("cargo build -p {packages} failed ({status}); see its output above")]
+    #[error("cargo build {packages} failed ({status}); see its output above")]
     Build {
         packages: String,
         status: ExitStatus,
@@ -26,6 +27,8 @@ pub enum HarnessError {
         program: String,
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Supervise(#[from] evgate_supervise::SuperviseError),
     #[error("{what} did not happen within {timeout:?}{children}")]
     Timeout {
         what: String,
@@ -88,39 +91,65 @@ pub fn binary_directory() -> PathBuf {
 /// features differently from the test build and compile (and execute) build scripts anew.
 pub const SERVICE_PACKAGES: [&str; 4] = ["evgate", "evgate-gate", "evgate-infer", "evgate-ingest"];
 
-/// Builds the binaries of [`SERVICE_PACKAGES`] with the profile of the tests (once per test
-/// process; cargo itself skips up-to-date work) and returns the path of `binary`.
-pub fn binary(binary: &str) -> Result<PathBuf, HarnessError> {
-    static BUILT: OnceLock<Mutex<bool>> = OnceLock::new();
-    let mut built = BUILT
+/// The package of the Rust examples; scripts/test.sh builds its examples beside the services.
+pub const EXAMPLES_PACKAGE: &str = "evgate-examples";
+
+/// Runs `cargo build` with `target_args` in the tests' profile, once per `built` flag per test
+/// process (cargo itself skips up-to-date work).
+fn build_once(
+    built: &'static OnceLock<Mutex<bool>>,
+    target_args: &[&str],
+) -> Result<(), HarnessError> {
+    let mut built = built
         .get_or_init(|| Mutex::new(false))
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner());
-    if !*built {
-        let directory = binary_directory();
-        let mut command = Command::new(env!("CARGO"));
-        command
-            .current_dir(workspace_root())
-            .args(["build", "--bins"]);
-        for package in SERVICE_PACKAGES {
-            command.args(["-p", package]);
-        }
-        if directory.file_name().is_some_and(|name| name == "release") {
-            command.arg("--release");
-        }
-        let status = command.status().map_err(|source| HarnessError::Spawn {
-            program: "cargo".to_owned(),
-            source,
-        })?;
-        if !status.success() {
-            return Err(HarnessError::Build {
-                packages: SERVICE_PACKAGES.join(" -p "),
-                status,
-            });
-        }
-        *built = true;
+    if *built {
+        return Ok(());
     }
+    let mut command = Command::new(env!("CARGO"));
+    command
+        .current_dir(workspace_root())
+        .arg("build")
+        .args(target_args);
+    if binary_directory()
+        .file_name()
+        .is_some_and(|name| name == "release")
+    {
+        command.arg("--release");
+    }
+    let status = command.status().map_err(|source| HarnessError::Spawn {
+        program: "cargo".to_owned(),
+        source,
+    })?;
+    if !status.success() {
+        return Err(HarnessError::Build {
+            packages: target_args.join(" "),
+            status,
+        });
+    }
+    *built = true;
+    Ok(())
+}
+
+/// Builds the binaries of [`SERVICE_PACKAGES`] with the profile of the tests (once per test
+/// process) and returns the path of `binary`.
+pub fn binary(binary: &str) -> Result<PathBuf, HarnessError> {
+    static BUILT: OnceLock<Mutex<bool>> = OnceLock::new();
+    let mut args = vec!["--bins"];
+    for package in SERVICE_PACKAGES {
+        args.extend(["-p", package]);
+    }
+    build_once(&BUILT, &args)?;
     Ok(binary_directory().join(binary))
+}
+
+/// Builds the examples of [`EXAMPLES_PACKAGE`] with the profile of the tests (once per test
+/// process) and returns the path of `example`.
+pub fn example(example: &str) -> Result<PathBuf, HarnessError> {
+    static BUILT: OnceLock<Mutex<bool>> = OnceLock::new();
+    build_once(&BUILT, &["--examples", "-p", EXAMPLES_PACKAGE])?;
+    Ok(binary_directory().join("examples").join(example))
 }
 
 /// Starts the service binary of `package` (named like the package) on the pipeline `names`,
@@ -148,6 +177,114 @@ pub fn unique_names(test: &str) -> PipelineNames {
         .unwrap_or(0);
     PipelineNames::new(&format!("e2e-{test}-{}-{nanos}", std::process::id()), "cam")
         .expect("test names are valid")
+}
+
+/// Starts `evgate-ingest` publishing 50 ms of the simulated camera as fast as it can, once
+/// `subscribers` listen to the events stream, with a JSON summary at the end.
+pub fn start_simulated_burst(
+    names: &PipelineNames,
+    subscribers: usize,
+) -> Result<Process, HarnessError> {
+    let subscribers = subscribers.to_string();
+    start_service(
+        "evgate-ingest",
+        names,
+        &[
+            "--json",
+            "--fast",
+            "--sim-duration-s",
+            "0.05",
+            "--wait-for-subscribers",
+            &subscribers,
+        ],
+    )
+}
+
+/// What [`consume_kept_stream`] returns: the JSON summaries of the consumer, the gate and the
+/// ingest.
+pub struct ConsumerRun {
+    pub consumer: serde_json::Value,
+    pub gate: serde_json::Value,
+    pub ingest: serde_json::Value,
+}
+
+impl ConsumerRun {
+    /// Events the gate passed on its kept stream.
+    pub fn passed(&self) -> u64 {
+        u64_at(&self.gate, "/stats/kept-events")
+            + u64_at(&self.gate, "/stats/unjudged-passed-events")
+    }
+}
+
+/// Runs `consumer` (its arguments built from the pipeline's names) as a reader of a gate's kept
+/// stream fed with 50 ms of the simulated camera, the gate started with
+/// `--json --exit-at-end-of-stream --overflow block --block-timeout-ms 30000` (a consumer slowed
+/// by a loaded machine then delays the gate instead of losing batches); waits until the consumer
+/// subscribed before any event flows.
+pub fn consume_kept_stream(
+    consumer: &Path,
+    consumer_args: impl FnOnce(&PipelineNames) -> Vec<String>,
+) -> ConsumerRun {
+    const TIMEOUT: Duration = Duration::from_secs(90);
+    let names = unique_names("consumer");
+    let gate_args = [
+        "--json",
+        "--exit-at-end-of-stream",
+        "--overflow",
+        "block",
+        "--block-timeout-ms",
+        "30000",
+    ];
+    let mut gate = start_service("evgate-gate", &names, &gate_args).unwrap();
+    let args = consumer_args(&names);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let mut consumer = Process::start(consumer, &args).unwrap();
+    let node = evgate_ipc::create_node("consumer-probe").unwrap();
+    let kept_probe =
+        evgate_ipc::SlicePublisher::<evgate_core::Event, evgate_ipc::BatchHeader>::open(
+            &node,
+            &names,
+            evgate_ipc::Stream::Kept,
+            &evgate_ipc::Qos::default(),
+        )
+        .unwrap();
+    wait_until("the consumer subscribing", TIMEOUT, || {
+        kept_probe.subscriber_count() == 1
+    })
+    .unwrap();
+    let ingest = start_simulated_burst(&names, 1)
+        .unwrap()
+        .summary(TIMEOUT)
+        .unwrap();
+    let consumer = consumer.summary(TIMEOUT).unwrap();
+    let gate = gate.summary(TIMEOUT).unwrap();
+    ConsumerRun {
+        consumer,
+        gate,
+        ingest,
+    }
+}
+
+/// The body of `GET /metrics` from a service's `--metrics-addr`, or None while nothing answers.
+pub fn scrape_metrics(address: &str) -> Option<String> {
+    use std::io::Write;
+    let mut stream = std::net::TcpStream::connect(address).ok()?;
+    write!(stream, "GET /metrics HTTP/1.0\r\nHost: localhost\r\n\r\n").ok()?;
+    let mut response = String::new();
+    stream.read_to_string(&mut response).ok()?;
+    Some(response)
+}
+
+/// The value of the sample `name` (no labels) in a scrape.
+pub fn metric_sample(text: &str, name: &str) -> Option<f64> {
+    text.lines()
+        .find_map(|line| line.strip_prefix(name)?.strip_prefix(' ')?.parse().ok())
+}
+
+/// A loopback address nobody listens on now (a service binds it a moment later).
+pub fn free_local_address() -> String {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("a free loopback port");
+    listener.local_addr().expect("a bound address").to_string()
 }
 
 /// Polls `condition` every 10 ms until it holds; fails after `timeout`.
@@ -182,18 +319,13 @@ struct StderrTail {
 
 /// A child and what a failure message tells of it.
 struct Watched {
-    name: String,
-    child: Child,
-    status: Option<ExitStatus>,
+    process: Supervised,
     stderr_tail: Arc<Mutex<StderrTail>>,
 }
 
 impl Watched {
     fn try_status(&mut self) -> Option<ExitStatus> {
-        if self.status.is_none() {
-            self.status = self.child.try_wait().ok().flatten();
-        }
-        self.status
+        self.process.try_status().ok().flatten()
     }
 
     /// `--- name (pid N): state`, then its last stderr lines.
@@ -213,8 +345,8 @@ impl Watched {
         let tail = lock(&self.stderr_tail);
         let mut report = format!(
             "\n--- {} (pid {}): {state}; last {} stderr lines:",
-            self.name,
-            self.child.id(),
+            self.process.name(),
+            self.process.pid(),
             tail.lines.len()
         );
         for line in tail.lines.iter() {
@@ -265,7 +397,8 @@ fn forward_stderr(name: String, stderr: ChildStderr, tail: Arc<Mutex<StderrTail>
     lock(&tail).closed = true;
 }
 
-/// A child process that is killed when dropped, so a failing test leaves nothing running.
+/// A child process that is killed when dropped (`evgate_supervise`, with no grace), so a failing
+/// test leaves nothing running.
 pub struct Process {
     pub name: String,
     watched: Arc<Mutex<Watched>>,
@@ -285,37 +418,29 @@ impl Process {
         args: &[&str],
         adjust: impl FnOnce(&mut Command),
     ) -> Result<Self, HarnessError> {
-        let name = program
-            .file_name()
-            .map(|name| name.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let mut command = Command::new(program);
-        command
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped());
-        if std::env::var_os("RUST_LOG").is_none() {
-            command.env("RUST_LOG", "warn,iceoryx2_bb_loggers=error");
-        }
-        // An error's backtrace would push the error itself out of the kept stderr tail.
-        if std::env::var_os("RUST_LIB_BACKTRACE").is_none() {
-            command.env("RUST_LIB_BACKTRACE", "0");
-        }
-        adjust(&mut command);
-        let mut child = command.spawn().map_err(|source| HarnessError::Spawn {
-            program: program.display().to_string(),
-            source,
-        })?;
+        let mut process =
+            Supervised::start(program, args, StderrTo::Pipe, Duration::ZERO, |command| {
+                // An error's backtrace would push the error itself out of the kept stderr tail.
+                if std::env::var_os("RUST_LIB_BACKTRACE").is_none() {
+                    command.env("RUST_LIB_BACKTRACE", "0");
+                }
+                adjust(command);
+            })
+            .map_err(|source| HarnessError::Spawn {
+                program: program.display().to_string(),
+                source: std::io::Error::other(source.to_string()),
+            })?;
+        let name = process.name().to_owned();
         let stderr_tail = Arc::new(Mutex::new(StderrTail::default()));
-        if let Some(stderr) = child.stderr.take() {
-            let (name, tail) = (format!("{name} {}", child.id()), Arc::clone(&stderr_tail));
-            std::thread::spawn(move || forward_stderr(name, stderr, tail));
+        if let Some(stderr) = process.take_stderr() {
+            let (label, tail) = (
+                format!("{name} {}", process.pid()),
+                Arc::clone(&stderr_tail),
+            );
+            std::thread::spawn(move || forward_stderr(label, stderr, tail));
         }
         let watched = Arc::new(Mutex::new(Watched {
-            name: name.clone(),
-            child,
-            status: None,
+            process,
             stderr_tail,
         }));
         STARTED_HERE.with(|started| {
@@ -327,7 +452,7 @@ impl Process {
     }
 
     pub fn pid(&self) -> u32 {
-        lock(&self.watched).child.id()
+        lock(&self.watched).process.pid()
     }
 
     /// Exit status once the process ended.
@@ -341,24 +466,14 @@ impl Process {
 
     /// Sends `signal` (e.g. `libc::SIGKILL` to simulate a crash, `libc::SIGTERM` to stop).
     pub fn signal(&mut self, signal: libc::c_int) {
-        if self.is_running() {
-            // SAFETY: kill(2) on our own unreaped child.
-            unsafe {
-                libc::kill(self.pid() as libc::pid_t, signal);
-            }
-        }
+        let _ = lock(&self.watched).process.signal(signal);
     }
 
     /// Waits for the exit (at most `timeout`) and returns the status and the stdout.
     pub fn wait(&mut self, timeout: Duration) -> Result<(ExitStatus, String), HarnessError> {
         let what = format!("exit of {} (pid {})", self.name, self.pid());
         wait_until(&what, timeout, || self.try_status().is_some())?;
-        let mut watched = lock(&self.watched);
-        let mut stdout = String::new();
-        if let Some(pipe) = watched.child.stdout.as_mut() {
-            let _ = pipe.read_to_string(&mut stdout);
-        }
-        Ok((watched.status.expect("waited for it"), stdout))
+        Ok(lock(&self.watched).process.finish(Duration::ZERO)?)
     }
 
     /// Waits for a successful exit and parses the JSON summary printed on stdout.
@@ -374,16 +489,6 @@ impl Process {
             return Err(failure(format!("exit status {status}"), stdout));
         }
         serde_json::from_str(&stdout).map_err(|error| failure(error.to_string(), stdout))
-    }
-}
-
-impl Drop for Process {
-    fn drop(&mut self) {
-        let mut watched = lock(&self.watched);
-        if watched.try_status().is_none() {
-            let _ = watched.child.kill();
-            let _ = watched.child.wait();
-        }
     }
 }
 

@@ -3,9 +3,15 @@
 
 use serde::{Deserialize, Serialize};
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
+
+use crate::bitset::words_for;
 use crate::event::Event;
 use crate::geometry::SensorSize;
-use crate::mask::{words_for, MaskError, MaskView};
+use crate::mask::{MaskError, MaskView};
 
 /// Why a gating call could not run.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
@@ -45,6 +51,7 @@ pub enum GateError {
 
 /// Which events pass the gate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum GateMode {
     /// Keep the events of independently moving objects (pixels in the mask), suppress the rest.
@@ -55,7 +62,7 @@ pub enum GateMode {
 
 impl GateMode {
     /// The value XOR-ed with a mask bit to get the keep bit.
-    const fn inversion(self) -> u64 {
+    pub(crate) const fn inversion(self) -> u64 {
         match self {
             GateMode::KeepMovingObjects => 0,
             GateMode::KeepEgoMotion => 1,
@@ -91,64 +98,49 @@ impl<'a> MaskLookup<'a> {
         }
     }
 
-    /// (1 if the pixel lies on the sensor, its mask bit or 0 off the sensor), without branches.
+    /// `[keep, judged]` bits of one event against this mask and the time interval
+    /// `[first, last]`, without branches: judged when on the sensor and inside the interval,
+    /// kept when judged and its mask bit (XOR `inversion`) is set.
     #[inline(always)]
-    fn probe(&self, event: &Event) -> (u64, u64) {
+    fn bits(&self, event: &Event, first: i64, last: i64, inversion: u64) -> [u64; 2] {
         let (x, y) = (u32::from(event.x), u32::from(event.y));
         let inside = (x < self.width) & (y < self.height);
         // Off-sensor events read pixel 0 (the mask is never empty) and are masked out below.
         let index = (u32::from(inside) * (y * self.width + x)) as usize;
         let bit = self.words[index / 64] >> (index % 64) & 1;
-        (u64::from(inside), bit & u64::from(inside))
+        let judged = u64::from(inside & (event.t >= first) & (event.t <= last));
+        [judged & (bit ^ inversion), judged]
+    }
+
+    /// The bits of 64 events, eight at a time with AVX-512 or four with AVX2 where the CPU has
+    /// them.
+    #[inline(always)]
+    fn chunk_bits(&self, chunk: &[Event; 64], first: i64, last: i64, inversion: u64) -> [u64; 2] {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU was just found to support AVX-512F.
+            return unsafe { avx512::chunk_bits(chunk, self, first, last, inversion) };
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU was just found to support AVX2.
+            return unsafe { avx2::chunk_bits(chunk, self, first, last, inversion) };
+        }
+        let mut words = [0u64; 2];
+        for (position, event) in chunk.iter().enumerate() {
+            for (word, bit) in words
+                .iter_mut()
+                .zip(self.bits(event, first, last, inversion))
+            {
+                *word |= bit << position;
+            }
+        }
+        words
     }
 }
 
-/// Appends each event to `kept` or `suppressed` by the mask bit of its pixel (order preserved
-/// in both); events off the sensor count as outside the mask. Returns the number kept.
-pub fn partition(
-    events: &[Event],
-    mask: MaskView<'_>,
-    mode: GateMode,
-    kept: &mut Vec<Event>,
-    suppressed: &mut Vec<Event>,
-) -> usize {
-    let lookup = MaskLookup::new(mask);
-    let inversion = mode.inversion();
-    let mut outputs = Outputs::new([kept, suppressed], events.len());
-    outputs.route(events, |event| {
-        let (_, bit) = lookup.probe(event);
-        bit ^ inversion
-    });
-    let [kept_count, _] = outputs.finish();
-    kept_count
-}
-
-/// Writes one keep bit per event into `keep` (bit i of word i / 64 for event i; the rest of the
-/// last word cleared); events off the sensor count as outside the mask. Returns the number
-/// kept.
-pub fn keep_bitmap(
-    events: &[Event],
-    mask: MaskView<'_>,
-    mode: GateMode,
-    keep: &mut [u64],
-) -> Result<usize, GateError> {
-    check_bitmap(keep, events.len())?;
-    let lookup = MaskLookup::new(mask);
-    let inversion = mode.inversion();
-    let mut kept = 0;
-    let mut sinks = BitSinks::new([keep]);
-    sinks.extend(events, |event| {
-        let (_, bit) = lookup.probe(event);
-        let keep_bit = bit ^ inversion;
-        kept += keep_bit as usize;
-        [keep_bit]
-    });
-    sinks.finish();
-    Ok(kept)
-}
-
 fn check_bitmap(words: &[u64], events: usize) -> Result<(), GateError> {
-    let required = events.div_ceil(64);
+    let required = words_for(events);
     if words.len() < required {
         return Err(GateError::BitmapTooShort {
             actual: words.len(),
@@ -157,108 +149,6 @@ fn check_bitmap(words: &[u64], events: usize) -> Result<(), GateError> {
         });
     }
     Ok(())
-}
-
-/// Positions of the output vectors of a partition.
-const KEPT: usize = 0;
-const SUPPRESSED: usize = 1;
-const UNJUDGED: usize = 2;
-
-/// The output vectors of a partition (kept, suppressed and, for a forecast, unjudged), filled
-/// without a branch per event.
-struct Outputs<'a, const N: usize> {
-    vectors: [&'a mut Vec<Event>; N],
-    written: [usize; N],
-}
-
-impl<'a, const N: usize> Outputs<'a, N> {
-    fn new(mut vectors: [&'a mut Vec<Event>; N], events: usize) -> Self {
-        for vector in &mut vectors {
-            vector.reserve(events);
-        }
-        let written = vectors.each_ref().map(|vector| vector.len());
-        Self { vectors, written }
-    }
-
-    /// Appends each event of `events` to the kept vector when `keep_of` gives 1, to the
-    /// suppressed one when it gives 0. At most as many events as were announced to `new` may be
-    /// routed in all.
-    #[inline(always)]
-    fn route(&mut self, events: &[Event], keep_of: impl Fn(&Event) -> u64) {
-        // Bases and cursors live in locals for the loop: kept behind `&mut Vec`, every write
-        // of an event would make the compiler reload them.
-        let kept_base = self.vectors[KEPT].as_mut_ptr();
-        let suppressed_base = self.vectors[SUPPRESSED].as_mut_ptr();
-        let [mut kept, mut suppressed] = [self.written[KEPT], self.written[SUPPRESSED]];
-        for event in events {
-            let keep = keep_of(event) as usize;
-            debug_assert!(kept < self.vectors[KEPT].capacity());
-            debug_assert!(suppressed < self.vectors[SUPPRESSED].capacity());
-            // Branch-free: write at both cursors and advance only the chosen one.
-            // SAFETY: `new` reserved one slot per announced event beyond each initial length,
-            // and each event advances one cursor, so both cursors stay below capacity.
-            unsafe {
-                kept_base.add(kept).write(*event);
-                suppressed_base.add(suppressed).write(*event);
-            }
-            kept += keep;
-            suppressed += 1 - keep;
-        }
-        [self.written[KEPT], self.written[SUPPRESSED]] = [kept, suppressed];
-    }
-
-    /// Appends the events of `chunk` (at most 64) whose bit is set in `bits` to vector `index`,
-    /// in order; set bits are found by trailing-zero counts, a full word is one copy.
-    #[inline(always)]
-    fn push_selected(&mut self, index: usize, chunk: &[Event], bits: u64) {
-        let all = u64::MAX >> (64 - chunk.len());
-        if bits == all {
-            self.push_all_into(index, chunk);
-            return;
-        }
-        let base = self.vectors[index].as_mut_ptr();
-        let mut written = self.written[index];
-        let mut rest = bits & all;
-        while rest != 0 {
-            let event = chunk[rest.trailing_zeros() as usize];
-            debug_assert!(written < self.vectors[index].capacity());
-            // SAFETY: `new` reserved one slot per announced event and each event is pushed
-            // once, into one vector.
-            unsafe { base.add(written).write(event) };
-            written += 1;
-            rest &= rest - 1;
-        }
-        self.written[index] = written;
-    }
-
-    /// Appends `events` to vector `index`.
-    fn push_all_into(&mut self, index: usize, events: &[Event]) {
-        let (vector, written) = (&mut self.vectors[index], &mut self.written[index]);
-        debug_assert!(*written + events.len() <= vector.capacity());
-        // SAFETY: as in `route`: the slots were reserved by `new`, and the source is a
-        // caller's slice, which cannot overlap the vector's spare capacity.
-        unsafe {
-            std::ptr::copy_nonoverlapping(
-                events.as_ptr(),
-                vector.as_mut_ptr().add(*written),
-                events.len(),
-            )
-        };
-        *written += events.len();
-    }
-
-    /// Commits the written events; returns how many each vector gained.
-    fn finish(self) -> [usize; N] {
-        let mut gained = [0; N];
-        for ((vector, written), gain) in self.vectors.into_iter().zip(self.written).zip(&mut gained)
-        {
-            *gain = written - vector.len();
-            // SAFETY: every slot below `written` was initialised by `route`, `push_selected`
-            // or `push_all_into`.
-            unsafe { vector.set_len(written) };
-        }
-        gained
-    }
 }
 
 /// Packs `N` bits per event into `N` bitmaps (bit i of word i / 64 for event i), filling whole
@@ -297,27 +187,28 @@ impl<'a, const N: usize> BitSinks<'a, N> {
         }
     }
 
-    /// Pushes the bits of every event of `run`, in order.
+    /// Pushes the bits of every event of `run`, in order: `bits_of` for the events before
+    /// and after the whole words, `chunk_bits_of` for each word-aligned run of 64.
     #[inline(always)]
-    fn extend(&mut self, run: &[Event], mut bits_of: impl FnMut(&Event) -> [u64; N]) {
+    fn extend(
+        &mut self,
+        run: &[Event],
+        mut bits_of: impl FnMut(&Event) -> [u64; N],
+        mut chunk_bits_of: impl FnMut(&[Event; 64]) -> [u64; N],
+    ) {
         let head = ((64 - self.index % 64) % 64).min(run.len());
         for event in &run[..head] {
             self.push(bits_of(event));
         }
-        let mut chunks = run[head..].chunks_exact(64);
-        for chunk in &mut chunks {
-            let mut words = [0u64; N];
-            for (position, event) in chunk.iter().enumerate() {
-                for (word, bit) in words.iter_mut().zip(bits_of(event)) {
-                    *word |= bit << position;
-                }
-            }
+        let (chunks, tail) = run[head..].as_chunks::<64>();
+        for chunk in chunks {
+            let words = chunk_bits_of(chunk);
             for (bitmap, word) in self.bitmaps.iter_mut().zip(words) {
                 bitmap[self.index / 64] = word;
             }
             self.index += 64;
         }
-        for event in chunks.remainder() {
+        for event in tail {
             self.push(bits_of(event));
         }
     }
@@ -374,7 +265,7 @@ impl<'a> ForecastView<'a> {
                 previous_us: horizons_us[index - 1],
             });
         }
-        let per_mask = words_for(size);
+        let per_mask = words_for(size.pixels());
         let expected = per_mask * horizons_us.len();
         if mask_words.len() != expected {
             return Err(GateError::MaskWordCount {
@@ -405,7 +296,7 @@ impl<'a> ForecastView<'a> {
 
     /// The mask of horizon `index` (0-based), or `None` past the last.
     pub fn mask(&self, index: usize) -> Option<MaskView<'a>> {
-        let per_mask = words_for(self.size);
+        let per_mask = words_for(self.size.pixels());
         let words = self
             .mask_words
             .get(index * per_mask..(index + 1) * per_mask)?;
@@ -460,51 +351,6 @@ impl<'a> ForecastView<'a> {
         judge(rest, None);
     }
 
-    /// Appends every event to exactly one of `kept`, `suppressed`, `unjudged`, preserving order
-    /// within each.
-    pub fn partition(
-        &self,
-        events: &[Event],
-        mode: GateMode,
-        kept: &mut Vec<Event>,
-        suppressed: &mut Vec<Event>,
-        unjudged: &mut Vec<Event>,
-    ) -> GateCounts {
-        let inversion = mode.inversion();
-        let mut outputs = Outputs::new([kept, suppressed, unjudged], events.len());
-        self.for_each_run(events, |run, mask_index| {
-            let Some(index) = mask_index else {
-                outputs.push_all_into(UNJUDGED, run);
-                return;
-            };
-            let lookup = MaskLookup::new(self.mask(index).expect("run index is a horizon"));
-            let (first, last) = self.interval(index);
-            // Bits first, then copies: each event is written once, and judged words of one
-            // fate are copied whole.
-            for chunk in run.chunks(64) {
-                let (mut keep, mut judged) = (0u64, 0u64);
-                for (position, event) in chunk.iter().enumerate() {
-                    let (inside, bit) = lookup.probe(event);
-                    let judged_bit = inside & u64::from((event.t >= first) & (event.t <= last));
-                    judged |= judged_bit << position;
-                    keep |= (judged_bit & (bit ^ inversion)) << position;
-                }
-                let all = u64::MAX >> (64 - chunk.len());
-                outputs.push_selected(KEPT, chunk, keep);
-                outputs.push_selected(SUPPRESSED, chunk, judged & !keep);
-                if judged != all {
-                    outputs.push_selected(UNJUDGED, chunk, all & !judged);
-                }
-            }
-        });
-        let [kept, suppressed, unjudged] = outputs.finish();
-        GateCounts {
-            kept,
-            suppressed,
-            unjudged,
-        }
-    }
-
     /// Writes two bits per event i, at bit i of word i / 64: `judged` (a mask judged it) and
     /// `keep` (judged and kept); unjudged events have both bits clear.
     pub fn keep_bitmap(
@@ -517,34 +363,41 @@ impl<'a> ForecastView<'a> {
         check_bitmap(keep, events.len())?;
         check_bitmap(judged, events.len())?;
         let inversion = mode.inversion();
-        let mut sinks = BitSinks::new([keep, judged]);
-        let mut counts = GateCounts::default();
+        let mut sinks = BitSinks::new([&mut *keep, &mut *judged]);
         self.for_each_run(events, |run, mask_index| {
             let Some(index) = mask_index else {
-                sinks.extend(run, |_| [0, 0]);
-                counts.unjudged += run.len();
+                sinks.extend(run, |_| [0, 0], |_| [0, 0]);
                 return;
             };
             let lookup = MaskLookup::new(self.mask(index).expect("run index is a horizon"));
             let (first, last) = self.interval(index);
-            sinks.extend(run, |event| {
-                let (inside, bit) = lookup.probe(event);
-                let judged_bit = inside & u64::from((event.t >= first) & (event.t <= last));
-                let keep_bit = judged_bit & (bit ^ inversion);
-                counts.kept += keep_bit as usize;
-                counts.unjudged += (1 - judged_bit) as usize;
-                [keep_bit, judged_bit]
-            });
+            sinks.extend(
+                run,
+                |event| lookup.bits(event, first, last, inversion),
+                |chunk| lookup.chunk_bits(chunk, first, last, inversion),
+            );
         });
         sinks.finish();
-        counts.suppressed = events.len() - counts.kept - counts.unjudged;
-        Ok(counts)
+        let words = words_for(events.len());
+        let ones = |bitmap: &[u64]| {
+            bitmap[..words]
+                .iter()
+                .map(|w| w.count_ones() as usize)
+                .sum()
+        };
+        let (kept, judged): (usize, usize) = (ones(keep), ones(judged));
+        Ok(GateCounts {
+            kept,
+            suppressed: judged - kept,
+            unjudged: events.len() - judged,
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bitset::bit;
     use crate::mask::BitMask;
     use proptest::prelude::*;
 
@@ -558,29 +411,33 @@ mod tests {
         mask
     }
 
-    fn bit(words: &[u64], index: usize) -> bool {
-        words[index / 64] >> (index % 64) & 1 == 1
-    }
-
-    #[test]
-    fn single_mask_partition_follows_pixels() {
-        let mask = mask_of(&[(1, 1)]);
-        let events = [
-            Event::new(0, 1, 1, true),
-            Event::new(1, 2, 1, true),
-            Event::new(2, 9, 0, true),
-        ];
-        let (mut kept, mut suppressed) = (Vec::new(), Vec::new());
-        let count = partition(
-            &events,
-            mask.view(),
-            GateMode::KeepMovingObjects,
-            &mut kept,
-            &mut suppressed,
+    /// (judged, kept) bits of every event, as `Option<bool>`: None when unjudged.
+    fn fates(forecast: &ForecastView<'_>, events: &[Event], mode: GateMode) -> Vec<Option<bool>> {
+        let words = words_for(events.len());
+        let (mut keep, mut judged) = (vec![u64::MAX; words], vec![u64::MAX; words]);
+        let counts = forecast
+            .keep_bitmap(events, mode, &mut keep, &mut judged)
+            .unwrap();
+        let fates: Vec<Option<bool>> = (0..events.len())
+            .map(|i| bit(&judged, i).then(|| bit(&keep, i)))
+            .collect();
+        assert_eq!(
+            counts.kept,
+            fates.iter().filter(|f| **f == Some(true)).count()
         );
-        assert_eq!(count, 1);
-        assert_eq!(kept, &events[..1]);
-        assert_eq!(suppressed, &events[1..]);
+        assert_eq!(
+            counts.unjudged,
+            fates.iter().filter(|f| f.is_none()).count()
+        );
+        assert_eq!(
+            counts.kept + counts.suppressed + counts.unjudged,
+            events.len()
+        );
+        if !events.len().is_multiple_of(64) {
+            assert_eq!(keep[events.len() / 64] >> (events.len() % 64), 0);
+            assert_eq!(judged[events.len() / 64] >> (events.len() % 64), 0);
+        }
+        fates
     }
 
     #[test]
@@ -618,24 +475,17 @@ mod tests {
             Event::new(130, 0, 0, true), // mask 2 up to 30: suppressed
             Event::new(131, 1, 0, true), // past the limit: unjudged
         ];
-        let (mut kept, mut suppressed, mut unjudged) = (Vec::new(), Vec::new(), Vec::new());
-        let counts = forecast.partition(
-            &events,
-            GateMode::KeepMovingObjects,
-            &mut kept,
-            &mut suppressed,
-            &mut unjudged,
-        );
-        assert_eq!(kept, [events[1], events[3]]);
-        assert_eq!(suppressed, [events[2], events[5]]);
-        assert_eq!(unjudged, [events[0], events[4], events[6]]);
         assert_eq!(
-            counts,
-            GateCounts {
-                kept: 2,
-                suppressed: 2,
-                unjudged: 3
-            }
+            fates(&forecast, &events, GateMode::KeepMovingObjects),
+            [
+                None,
+                Some(true),
+                Some(false),
+                Some(true),
+                None,
+                Some(false),
+                None
+            ]
         );
     }
 
@@ -650,20 +500,12 @@ mod tests {
             Event::new(90, 0, 0, true),
             Event::new(2, 0, 0, true),
         ];
-        let (mut kept, mut suppressed, mut unjudged) = (Vec::new(), Vec::new(), Vec::new());
-        forecast.partition(
-            &events,
-            GateMode::KeepMovingObjects,
-            &mut kept,
-            &mut suppressed,
-            &mut unjudged,
-        );
+        let fates = fates(&forecast, &events, GateMode::KeepMovingObjects);
         // Judged or not, each event's outcome must match its own time's mask: mask 1 is empty
         // (events at 1 and 2 may only be suppressed), mask 2 holds the pixel (90 may only be
         // kept).
-        assert!(!kept.contains(&events[0]) && !kept.contains(&events[2]));
-        assert!(!suppressed.contains(&events[1]));
-        assert_eq!(kept.len() + suppressed.len() + unjudged.len(), 3);
+        assert!(fates[0] != Some(true) && fates[2] != Some(true));
+        assert!(fates[1] != Some(false));
     }
 
     #[test]
@@ -694,13 +536,13 @@ mod tests {
             ForecastView::new(0, &[5], size, &[u64::MAX]),
             Err(GateError::Mask { index: 0, .. })
         ));
-        let mask = mask_of(&[]);
+        let forecast = ForecastView::new(0, &[5], size, &words[..1]).unwrap();
         assert!(matches!(
-            keep_bitmap(
+            forecast.keep_bitmap(
                 &[Event::default(); 65],
-                mask.view(),
                 GateMode::KeepEgoMotion,
-                &mut [0]
+                &mut [0],
+                &mut [0, 0]
             ),
             Err(GateError::BitmapTooShort { required: 2, .. })
         ));
@@ -736,53 +578,62 @@ mod tests {
         ]
     }
 
-    /// True when `part` is a subsequence of `whole` (order preserved).
-    fn is_subsequence(part: &[Event], whole: &[Event]) -> bool {
-        let mut rest = whole.iter();
-        part.iter()
-            .all(|event| rest.any(|candidate| candidate == event))
+    fn any_event() -> impl Strategy<Value = Event> {
+        (
+            prop_oneof![-30i64..60, any::<i64>()],
+            prop_oneof![0u16..12, any::<u16>()],
+            prop_oneof![0u16..9, any::<u16>()],
+            any::<bool>(),
+        )
+            .prop_map(|(t, x, y, on)| Event::new(t, x, y, on))
     }
 
     proptest! {
         #[test]
-        fn single_mask_outputs_cover_input_and_agree(
-            events in arbitrary_events(), mask in arbitrary_mask(), mode in mode(),
+        fn the_avx2_and_avx512_chunk_kernels_equal_the_scalar_one(
+            events in prop::collection::vec(any_event(), 64),
+            mask in arbitrary_mask(),
+            bounds in (prop_oneof![-10i64..50, any::<i64>()], prop_oneof![-10i64..50, any::<i64>()]),
+            inversion in 0u64..2,
         ) {
-            let (mut kept, mut suppressed) = (vec![Event::new(-1, 0, 0, true)], Vec::new());
-            let count = partition(&events, mask.view(), mode, &mut kept, &mut suppressed);
-            let kept = &kept[1..];
-            prop_assert_eq!(count, kept.len());
-            prop_assert_eq!(kept.len() + suppressed.len(), events.len());
-            prop_assert!(is_subsequence(kept, &events) && is_subsequence(&suppressed, &events));
-            let mut bitmap = vec![u64::MAX; events.len().div_ceil(64) + 1];
-            let bitmap_count = keep_bitmap(&events, mask.view(), mode, &mut bitmap).unwrap();
-            prop_assert_eq!(bitmap_count, count);
-            let from_bitmap: Vec<Event> = (0..events.len())
-                .filter(|&i| bit(&bitmap, i))
-                .map(|i| events[i])
-                .collect();
-            prop_assert_eq!(&from_bitmap[..], kept);
-            if events.len() % 64 != 0 {
-                prop_assert_eq!(bitmap[events.len() / 64] >> (events.len() % 64), 0);
+            if !std::is_x86_feature_detected!("avx2") {
+                return Ok(());
             }
-            for (index, event) in events.iter().enumerate() {
-                let in_mask = mask.get(event.x, event.y);
-                prop_assert_eq!(bit(&bitmap, index), in_mask == (mode == GateMode::KeepMovingObjects));
+            let chunk: &[Event; 64] = events.as_slice().try_into().unwrap();
+            let lookup = MaskLookup::new(mask.view());
+            let (first, last) = bounds;
+            let mut scalar = [0u64; 2];
+            for (position, event) in chunk.iter().enumerate() {
+                for (word, bit) in scalar.iter_mut().zip(lookup.bits(event, first, last, inversion)) {
+                    *word |= bit << position;
+                }
+            }
+            // SAFETY: AVX2 was detected above.
+            let vector = unsafe { avx2::chunk_bits(chunk, &lookup, first, last, inversion) };
+            prop_assert_eq!(vector, scalar);
+            if std::is_x86_feature_detected!("avx512f") {
+                // SAFETY: AVX-512F was just detected.
+                let wide = unsafe { avx512::chunk_bits(chunk, &lookup, first, last, inversion) };
+                prop_assert_eq!(wide, scalar);
             }
         }
 
         #[test]
-        fn inverting_the_mode_swaps_outputs(events in arbitrary_events(), mask in arbitrary_mask()) {
-            let (mut kept, mut suppressed) = (Vec::new(), Vec::new());
-            partition(&events, mask.view(), GateMode::KeepMovingObjects, &mut kept, &mut suppressed);
-            let (mut kept_inverse, mut suppressed_inverse) = (Vec::new(), Vec::new());
-            partition(&events, mask.view(), GateMode::KeepEgoMotion, &mut kept_inverse, &mut suppressed_inverse);
-            prop_assert_eq!(kept, suppressed_inverse);
-            prop_assert_eq!(suppressed, kept_inverse);
+        fn inverting_the_mode_swaps_kept_and_suppressed(
+            events in arbitrary_events(),
+            masks in prop::collection::vec(arbitrary_mask(), 1..4),
+        ) {
+            let horizons: Vec<i64> = (0..masks.len() as i64).map(|k| 10 + 30 * k).collect();
+            let words: Vec<u64> = masks.iter().flat_map(|m| m.as_words()).copied().collect();
+            let forecast = ForecastView::new(0, &horizons, SIZE, &words).unwrap();
+            let moving = fates(&forecast, &events, GateMode::KeepMovingObjects);
+            let ego = fates(&forecast, &events, GateMode::KeepEgoMotion);
+            let inverted: Vec<Option<bool>> = moving.iter().map(|fate| fate.map(|kept| !kept)).collect();
+            prop_assert_eq!(ego, inverted);
         }
 
         #[test]
-        fn forecast_outputs_cover_input_and_agree(
+        fn every_event_is_judged_by_the_documented_rule(
             events in arbitrary_events(),
             masks in prop::collection::vec(arbitrary_mask(), 1..4),
             mode in mode(),
@@ -790,30 +641,7 @@ mod tests {
             let horizons: Vec<i64> = (0..masks.len() as i64).map(|k| 10 + 30 * k).collect();
             let words: Vec<u64> = masks.iter().flat_map(|m| m.as_words()).copied().collect();
             let forecast = ForecastView::new(0, &horizons, SIZE, &words).unwrap();
-            let (mut kept, mut suppressed, mut unjudged) = (Vec::new(), Vec::new(), Vec::new());
-            let counts = forecast.partition(&events, mode, &mut kept, &mut suppressed, &mut unjudged);
-            prop_assert_eq!(
-                (counts.kept, counts.suppressed, counts.unjudged),
-                (kept.len(), suppressed.len(), unjudged.len())
-            );
-            prop_assert_eq!(kept.len() + suppressed.len() + unjudged.len(), events.len());
-            for part in [&kept, &suppressed, &unjudged] {
-                prop_assert!(is_subsequence(part, &events));
-            }
-            let words_needed = events.len().div_ceil(64);
-            let (mut keep, mut judged) = (vec![u64::MAX; words_needed], vec![u64::MAX; words_needed]);
-            let bitmap_counts = forecast.keep_bitmap(&events, mode, &mut keep, &mut judged).unwrap();
-            prop_assert_eq!(bitmap_counts, counts);
-            let pick = |want_judged: bool, want_keep: bool| -> Vec<Event> {
-                (0..events.len())
-                    .filter(|&i| bit(&judged, i) == want_judged && bit(&keep, i) == want_keep)
-                    .map(|i| events[i])
-                    .collect()
-            };
-            prop_assert_eq!(pick(true, true), kept.clone());
-            prop_assert_eq!(pick(true, false), suppressed.clone());
-            prop_assert_eq!(pick(false, false), unjudged.clone());
-            // Reference judgement, event by event, from the documented rule.
+            let fates = fates(&forecast, &events, mode);
             for (index, event) in events.iter().enumerate() {
                 let d = event.t;
                 let expected = if d < 0 || d > forecast.valid_limit_us() || !SIZE.contains(event) {
@@ -825,8 +653,7 @@ mod tests {
                         .unwrap_or(0);
                     Some(masks[mask_index].get(event.x, event.y) == (mode == GateMode::KeepMovingObjects))
                 };
-                let actual = bit(&judged, index).then(|| bit(&keep, index));
-                prop_assert_eq!(actual, expected, "event {} {:?}", index, event);
+                prop_assert_eq!(fates[index], expected, "event {} {:?}", index, event);
             }
         }
     }

@@ -31,6 +31,15 @@ impl SensorSize {
         y as usize * self.width as usize + x as usize
     }
 
+    /// The size of this sensor binned `factor`×`factor` (a partial last column or row of
+    /// pixels makes a cell of its own); `factor` must not be 0.
+    pub const fn binned(&self, factor: u16) -> SensorSize {
+        SensorSize {
+            width: self.width.div_ceil(factor),
+            height: self.height.div_ceil(factor),
+        }
+    }
+
     /// The smallest size whose sides are multiples of `multiple` and at least this size
     /// (the network's encoder halves the resolution four times, so it needs multiples of 16);
     /// `None` where a side would pass 65 535.
@@ -76,6 +85,19 @@ mod tests {
             SensorSize::new(65_520, 1).padded_to(16),
             Some(SensorSize::new(65_520, 16))
         );
+    }
+
+    #[test]
+    fn binning_rounds_partial_cells_up() {
+        assert_eq!(
+            SensorSize::new(1280, 720).binned(2),
+            SensorSize::new(640, 360)
+        );
+        assert_eq!(
+            SensorSize::new(346, 260).binned(3),
+            SensorSize::new(116, 87)
+        );
+        assert_eq!(SensorSize::new(5, 7).binned(1), SensorSize::new(5, 7));
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! Binary pixel masks packed one bit per pixel (row-major, least significant bit first), the
 //! form in which masks travel through shared memory and are looked up by the gate.
 
+use crate::bitset::words_for;
 use crate::geometry::SensorSize;
 
 /// Why a mask could not be built or changed.
@@ -30,18 +31,15 @@ pub enum MaskError {
     BitsBeyondLastPixel { word: usize, size: SensorSize },
     #[error("pixel ({x}, {y}) lies outside the {size} mask")]
     PixelOutside { x: u16, y: u16, size: SensorSize },
-}
-
-/// Number of u64 words holding one bit per pixel of `size`.
-pub const fn words_for(size: SensorSize) -> usize {
-    size.pixels().div_ceil(64)
+    #[error("a mask cannot be drawn from logits binned 0x0 pixels")]
+    ZeroDownsample,
 }
 
 fn validate_words(size: SensorSize, words: &[u64]) -> Result<(), MaskError> {
     if size.pixels() == 0 {
         return Err(MaskError::EmptySize { size });
     }
-    let expected = words_for(size);
+    let expected = words_for(size.pixels());
     if words.len() != expected {
         return Err(MaskError::WordCount {
             expected,
@@ -67,7 +65,7 @@ pub struct MaskView<'a> {
 }
 
 impl<'a> MaskView<'a> {
-    /// Views `words` as a mask of `size`; the word count must be [`words_for`]`(size)` and the
+    /// Views `words` as a mask of `size`; the word count must be [`words_for`]`(size.pixels())` and the
     /// bits past the last pixel must be zero.
     pub fn new(size: SensorSize, words: &'a [u64]) -> Result<Self, MaskError> {
         validate_words(size, words)?;
@@ -92,6 +90,13 @@ impl<'a> MaskView<'a> {
     }
 
     /// Number of set pixels.
+    /// One flag per pixel, row-major, for code that scores masks pixel by pixel.
+    pub fn to_bools(&self) -> Vec<bool> {
+        (0..self.size.pixels())
+            .map(|pixel| self.words[pixel / 64] >> (pixel % 64) & 1 == 1)
+            .collect()
+    }
+
     pub fn count_ones(&self) -> usize {
         self.words
             .iter()
@@ -115,7 +120,7 @@ impl BitMask {
         }
         Ok(Self {
             size,
-            words: vec![0; words_for(size)],
+            words: vec![0; words_for(size.pixels())],
         })
     }
 
@@ -143,21 +148,7 @@ impl BitMask {
     ) -> Result<(), MaskError> {
         let size = self.size;
         let width = usize::from(size.width);
-        if row_stride < width {
-            return Err(MaskError::StrideTooSmall {
-                row_stride,
-                width: size.width,
-            });
-        }
-        let required = (usize::from(size.height) - 1) * row_stride + width;
-        if logits.len() < required {
-            return Err(MaskError::TooFewLogits {
-                actual: logits.len(),
-                required,
-                size,
-                row_stride,
-            });
-        }
+        check_logits(logits, size, row_stride)?;
         // Comparisons in fixed blocks of 32, which the compiler turns into vector compares and
         // sign-bit moves, packed into words by a running writer: 640×480 × 9 planes took 4.3 ms
         // per window bit by bit (`git show dd99da7:BENCHMARKS.md`, "Inference").
@@ -170,6 +161,49 @@ impl BitMask {
             }
             let rest = blocks.remainder();
             writer.push(bits_above(rest, threshold_logit), rest.len() as u32);
+        }
+        writer.finish();
+        Ok(())
+    }
+
+    /// Fills this mask from logits over its pixels binned `downsample`×`downsample`
+    /// ([`SensorSize::binned`]): every pixel takes the verdict of its cell, so that events are
+    /// still judged at full resolution when the network ran on a binned grid.
+    pub fn fill_from_binned_logits(
+        &mut self,
+        logits: &[f32],
+        row_stride: usize,
+        threshold_logit: f32,
+        downsample: u16,
+    ) -> Result<(), MaskError> {
+        match downsample {
+            0 => return Err(MaskError::ZeroDownsample),
+            1 => return self.fill_from_logits(logits, row_stride, threshold_logit),
+            _ => {}
+        }
+        let size = self.size;
+        let cells = size.binned(downsample);
+        check_logits(logits, cells, row_stride)?;
+        let (width, height) = (usize::from(size.width), usize::from(size.height));
+        let factor = usize::from(downsample);
+        // One row of cells expands to one row of pixels, which `downsample` rows repeat.
+        let mut row_words = vec![0; words_for(width)];
+        let mut writer = BitWriter::new(&mut self.words);
+        for (cell_row, row) in logits
+            .chunks(row_stride)
+            .take(usize::from(cells.height))
+            .enumerate()
+        {
+            let mut row_writer = BitWriter::new(&mut row_words);
+            for (cell, &logit) in row[..usize::from(cells.width)].iter().enumerate() {
+                let pixels = factor.min(width - cell * factor);
+                row_writer.push_run(logit > threshold_logit, pixels);
+            }
+            row_writer.finish();
+            let rows = factor.min(height - cell_row * factor);
+            for _ in 0..rows {
+                writer.push_words(&row_words, width);
+            }
         }
         writer.finish();
         Ok(())
@@ -226,6 +260,27 @@ impl BitMask {
     }
 }
 
+/// A `size` map of logits with `row_stride` values per row must hold the last row's pixels.
+fn check_logits(logits: &[f32], size: SensorSize, row_stride: usize) -> Result<(), MaskError> {
+    let width = usize::from(size.width);
+    if row_stride < width {
+        return Err(MaskError::StrideTooSmall {
+            row_stride,
+            width: size.width,
+        });
+    }
+    let required = (usize::from(size.height) - 1) * row_stride + width;
+    if logits.len() < required {
+        return Err(MaskError::TooFewLogits {
+            actual: logits.len(),
+            required,
+            size,
+            row_stride,
+        });
+    }
+    Ok(())
+}
+
 /// Bit i set when `logits[i] > threshold_logit` (NaN never), for up to 64 logits. Inlined, so
 /// that a fixed-size block compiles to vector compares.
 #[inline(always)]
@@ -271,6 +326,28 @@ impl<'a> BitWriter<'a> {
         }
     }
 
+    /// Appends `count` copies of `bit`.
+    fn push_run(&mut self, bit: bool, mut count: usize) {
+        while count > 0 {
+            let chunk = count.min(32) as u32;
+            self.push(if bit { u64::MAX >> (64 - chunk) } else { 0 }, chunk);
+            count -= chunk as usize;
+        }
+    }
+
+    /// Appends the first `bits` bits of `words`.
+    fn push_words(&mut self, words: &[u64], bits: usize) {
+        for (index, &word) in words.iter().enumerate() {
+            let count = (bits - index * 64).min(64) as u32;
+            let low = count.min(32);
+            self.push(word & (u64::MAX >> (64 - low)), low);
+            if count > 32 {
+                let high = count - 32;
+                self.push((word >> 32) & (u64::MAX >> (64 - high)), high);
+            }
+        }
+    }
+
     /// Stores the partial last word and clears the words after it.
     fn finish(self) {
         let mut next = self.next;
@@ -311,6 +388,46 @@ mod tests {
         assert!(!mask.get(3, 0));
     }
 
+    /// A reproducible stream of pseudo-random words (xorshift64) for logit maps.
+    fn xorshift(seed: u64) -> impl Iterator<Item = u64> {
+        let mut x = seed | 1;
+        std::iter::repeat_with(move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        })
+    }
+
+    proptest! {
+        #[test]
+        fn every_pixel_takes_the_verdict_of_its_binned_cell(
+            width in 1u16..300,
+            height in 1u16..12,
+            downsample in 1u16..40,
+            padding in 0usize..20,
+            seed in any::<u64>(),
+        ) {
+            let size = SensorSize::new(width, height);
+            let cells = size.binned(downsample);
+            let row_stride = usize::from(cells.width) + padding;
+            let logits: Vec<f32> = xorshift(seed)
+                .take(row_stride * usize::from(cells.height))
+                .map(|x| (x % 2001) as f32 / 1000.0 - 1.0)
+                .collect();
+            let mut mask = BitMask::new(size).unwrap();
+            mask.fill_from_logits(&vec![1.0; size.pixels()], usize::from(width), 0.0).unwrap();
+            mask.fill_from_binned_logits(&logits, row_stride, 0.25, downsample).unwrap();
+            for y in 0..height {
+                for x in 0..width {
+                    let cell = usize::from(y / downsample) * row_stride + usize::from(x / downsample);
+                    prop_assert_eq!(mask.get(x, y), logits[cell] > 0.25, "pixel ({}, {})", x, y);
+                }
+            }
+            prop_assert!(validate_words(size, mask.as_words()).is_ok());
+        }
+    }
+
     proptest! {
         #[test]
         fn blockwise_thresholding_sets_exactly_the_pixels_above_the_threshold(
@@ -322,12 +439,9 @@ mod tests {
         ) {
             let size = SensorSize::new(width, height);
             let row_stride = usize::from(width) + padding;
-            let mut x = seed | 1;
-            let logits: Vec<f32> = (0..row_stride * usize::from(height))
-                .map(|_| {
-                    x ^= x << 13;
-                    x ^= x >> 7;
-                    x ^= x << 17;
+            let logits: Vec<f32> = xorshift(seed)
+                .take(row_stride * usize::from(height))
+                .map(|x| {
                     match x % 17 {
                         0 => f32::NAN,
                         1 => threshold_logit,
@@ -336,7 +450,7 @@ mod tests {
                 })
                 .collect();
             // Start from a full mask: every bit must be rewritten.
-            let mut words = vec![u64::MAX; words_for(size)];
+            let mut words = vec![u64::MAX; words_for(size.pixels())];
             let used_bits = size.pixels() % 64;
             if used_bits != 0 {
                 *words.last_mut().unwrap() = (1u64 << used_bits) - 1;
@@ -382,7 +496,7 @@ mod tests {
     #[test]
     fn words_are_validated() {
         let size = SensorSize::new(10, 7);
-        assert_eq!(words_for(size), 2);
+        assert_eq!(words_for(size.pixels()), 2);
         assert!(matches!(
             BitMask::from_words(size, vec![0]),
             Err(MaskError::WordCount {

@@ -1,6 +1,9 @@
 //! The network's input representation: a voxel grid of `B` time bins over the sensor, padded
 //! at the right and bottom to a multiple of 16, stored `[B, H, W]` row-major in f32 so it can be
-//! handed to ONNX Runtime as is.
+//! handed to ONNX Runtime as is. A downsampled grid bins the sensor's pixels N×N, so that a
+//! sensor larger than the model's input still runs.
+
+use std::borrow::Cow;
 
 use crate::event::Event;
 use crate::geometry::SensorSize;
@@ -16,11 +19,22 @@ pub enum VoxelError {
     ZeroBins,
     #[error("voxel grid needs a non-empty sensor, got {sensor}")]
     EmptySensor { sensor: SensorSize },
+    #[error("voxel grid downsampling must bin at least 1x1 pixels, got --downsample 0")]
+    ZeroDownsample,
     #[error(
         "voxel grid cannot pad a {sensor} sensor to multiples of {PADDING_MULTIPLE}: a side \
          would pass 65535 (is the sensor size known? text event files need --sensor)"
     )]
     SensorTooLarge { sensor: SensorSize },
+    #[error(
+        "a {sensor} sensor pads to {padded}, larger than the {input} input the model takes; \
+         export one for this size, pass another model or bin the sensor (--downsample)"
+    )]
+    InputTooSmall {
+        sensor: SensorSize,
+        padded: SensorSize,
+        input: SensorSize,
+    },
 }
 
 /// How many events one [`VoxelGrid::accumulate`] call splatted or skipped.
@@ -47,6 +61,8 @@ impl std::ops::AddAssign for SplatCounts {
 pub struct VoxelGrid {
     bins: usize,
     sensor: SensorSize,
+    /// Side of the square of sensor pixels one cell bins (1: a cell per pixel).
+    downsample: u16,
     padded: SensorSize,
     cells: Vec<f32>,
     counts: SplatCounts,
@@ -64,18 +80,33 @@ pub struct NonZeroStats {
 impl VoxelGrid {
     /// An all-zero grid of `bins` time bins over `sensor`, padded to multiples of 16.
     pub fn new(sensor: SensorSize, bins: usize) -> Result<Self, VoxelError> {
+        Self::downsampled(sensor, bins, 1)
+    }
+
+    /// An all-zero grid whose cells each bin `downsample`×`downsample` pixels of `sensor`
+    /// (the last column and row of cells take what is left), padded to multiples of 16.
+    pub fn downsampled(
+        sensor: SensorSize,
+        bins: usize,
+        downsample: u16,
+    ) -> Result<Self, VoxelError> {
         if bins == 0 {
             return Err(VoxelError::ZeroBins);
+        }
+        if downsample == 0 {
+            return Err(VoxelError::ZeroDownsample);
         }
         if sensor.pixels() == 0 {
             return Err(VoxelError::EmptySensor { sensor });
         }
         let padded = sensor
+            .binned(downsample)
             .padded_to(PADDING_MULTIPLE)
             .ok_or(VoxelError::SensorTooLarge { sensor })?;
         Ok(Self {
             bins,
             sensor,
+            downsample,
             padded,
             cells: vec![0.0; bins * padded.pixels()],
             counts: SplatCounts::default(),
@@ -86,8 +117,14 @@ impl VoxelGrid {
         self.bins
     }
 
+    /// The sensor the events come from (before binning).
     pub fn sensor(&self) -> SensorSize {
         self.sensor
+    }
+
+    /// Side of the square of sensor pixels one cell bins.
+    pub fn downsample(&self) -> u16 {
+        self.downsample
     }
 
     /// The stored (padded) plane size: the `H`, `W` of the `[B, H, W]` layout.
@@ -124,17 +161,42 @@ impl VoxelGrid {
     /// Events with `start ≤ t ≤ end` count (end included so that a window `[t − 50 ms, t]`
     /// keeps the event at the reference time); others are skipped and counted, as are events
     /// outside the sensor.
+    /// Downsampled, an event adds to the cell that bins its pixel.
     pub fn accumulate(&mut self, events: &[Event], window: TimeSpan) -> SplatCounts {
-        let counts = if self.bins == 1 {
-            self.accumulate_single_bin(events, window)
-        } else {
-            self.accumulate_interpolated(events, window)
+        let counts = match self.downsample {
+            1 => self.accumulate_cells(events, window, |x, y| (x, y)),
+            factor => {
+                let factor = u32::from(factor);
+                self.accumulate_cells(events, window, |x, y| (x / factor, y / factor))
+            }
         };
         self.counts += counts;
         counts
     }
 
-    fn accumulate_single_bin(&mut self, events: &[Event], window: TimeSpan) -> SplatCounts {
+    /// `cell_of` maps a pixel on the sensor to its cell; passed as a closure so that the
+    /// per-pixel grid keeps a path without the division.
+    #[inline(always)]
+    fn accumulate_cells(
+        &mut self,
+        events: &[Event],
+        window: TimeSpan,
+        cell_of: impl Fn(u32, u32) -> (u32, u32),
+    ) -> SplatCounts {
+        if self.bins == 1 {
+            self.accumulate_single_bin(events, window, cell_of)
+        } else {
+            self.accumulate_interpolated(events, window, cell_of)
+        }
+    }
+
+    #[inline(always)]
+    fn accumulate_single_bin(
+        &mut self,
+        events: &[Event],
+        window: TimeSpan,
+        cell_of: impl Fn(u32, u32) -> (u32, u32),
+    ) -> SplatCounts {
         let (width, height) = (u32::from(self.sensor.width), u32::from(self.sensor.height));
         let row_stride = usize::from(self.padded.width);
         let span = window.duration();
@@ -150,19 +212,26 @@ impl VoxelGrid {
                 counts.outside_window += 1;
                 continue;
             }
+            let (x, y) = cell_of(x, y);
             self.cells[y as usize * row_stride + x as usize] += polarity_value(event);
             counts.splatted += 1;
         }
         counts
     }
 
-    fn accumulate_interpolated(&mut self, events: &[Event], window: TimeSpan) -> SplatCounts {
+    #[inline(always)]
+    fn accumulate_interpolated(
+        &mut self,
+        events: &[Event],
+        window: TimeSpan,
+        cell_of: impl Fn(u32, u32) -> (u32, u32),
+    ) -> SplatCounts {
         // With the paper's two bins every event's lower bin is 0; a constant bound lets the
         // compiler drop the floor and the clamp from the per-event path (same arithmetic).
         if self.bins == 2 {
-            self.splat_between_bins(events, window, 0)
+            self.splat_between_bins(events, window, 0, cell_of)
         } else {
-            self.splat_between_bins(events, window, self.bins - 2)
+            self.splat_between_bins(events, window, self.bins - 2, cell_of)
         }
     }
 
@@ -174,6 +243,7 @@ impl VoxelGrid {
         events: &[Event],
         window: TimeSpan,
         last_lower_bin: usize,
+        cell_of: impl Fn(u32, u32) -> (u32, u32),
     ) -> SplatCounts {
         let (width, height) = (u32::from(self.sensor.width), u32::from(self.sensor.height));
         let row_stride = usize::from(self.padded.width);
@@ -200,9 +270,11 @@ impl VoxelGrid {
             let lower_bin = (normalised_time as usize).min(last_lower_bin);
             let upper_weight = normalised_time - lower_bin as f32;
             let value = polarity_value(event);
+            let (x, y) = cell_of(x, y);
             let index = lower_bin * plane + y as usize * row_stride + x as usize;
             debug_assert!(index + plane < cells.len());
-            // SAFETY: x < width ≤ row_stride, y < height ≤ padded height and
+            // SAFETY: x < width and y < height, so their cell lies within the binned sensor,
+            // whose padded size is the plane's (row_stride and its height); and
             // lower_bin ≤ B − 2, so index + plane < B · plane = cells.len().
             unsafe {
                 *cells.get_unchecked_mut(index) += value - value * upper_weight;
@@ -288,6 +360,36 @@ impl VoxelGrid {
     pub fn as_slice(&self) -> &[f32] {
         &self.cells
     }
+
+    /// The cells as a model's `input`-sized grid: zero-padded further at the right and bottom
+    /// when the input is larger than this grid's padded size (the contract's own padding, so
+    /// a 320×240 sensor runs on a network exported for 352×272). The normalisation is
+    /// unchanged: it reads only non-zero cells.
+    pub fn as_input(&self, input: SensorSize) -> Result<Cow<'_, [f32]>, VoxelError> {
+        let padded = self.padded;
+        if padded == input {
+            return Ok(Cow::Borrowed(&self.cells));
+        }
+        if padded.width > input.width || padded.height > input.height {
+            return Err(VoxelError::InputTooSmall {
+                sensor: self.sensor,
+                padded,
+                input,
+            });
+        }
+        let (from_width, to_width) = (usize::from(padded.width), usize::from(input.width));
+        let mut fitted = vec![0.0; self.bins * input.pixels()];
+        for (plane, target) in self
+            .cells
+            .chunks(padded.pixels())
+            .zip(fitted.chunks_mut(input.pixels()))
+        {
+            for (row, values) in plane.chunks(from_width).enumerate() {
+                target[row * to_width..row * to_width + from_width].copy_from_slice(values);
+            }
+        }
+        Ok(Cow::Owned(fitted))
+    }
 }
 
 /// Independent accumulators of the statistics passes.
@@ -317,6 +419,39 @@ fn polarity_value(event: &Event) -> f32 {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn a_larger_model_input_gets_the_grid_zero_padded() {
+        let mut voxel = VoxelGrid::new(SensorSize::new(16, 16), 2).unwrap();
+        voxel.accumulate(
+            &[Event::new(10, 15, 15, true)],
+            TimeSpan::new(0, 20).unwrap(),
+        );
+        let fitted = voxel.as_input(SensorSize::new(32, 48)).unwrap();
+        assert_eq!(fitted.len(), 2 * 32 * 48);
+        let sum_of = |values: &[f32]| values.iter().map(|v| v.abs()).sum::<f32>();
+        assert!(sum_of(voxel.as_slice()) > 0.0);
+        assert_eq!(sum_of(&fitted), sum_of(voxel.as_slice()));
+        for bin in 0..2 {
+            for row in 0..16 {
+                let source = &voxel.as_slice()[bin * 256 + row * 16..bin * 256 + row * 16 + 16];
+                let target = &fitted[bin * 1536 + row * 32..bin * 1536 + row * 32 + 16];
+                assert_eq!(source, target);
+            }
+        }
+        assert!(matches!(
+            voxel.as_input(voxel.padded()).unwrap(),
+            Cow::Borrowed(_)
+        ));
+        assert_eq!(
+            voxel
+                .as_input(SensorSize::new(32, 8))
+                .unwrap_err()
+                .to_string(),
+            "a 16x16 sensor pads to 16x16, larger than the 32x8 input the model takes; export \
+             one for this size, pass another model or bin the sensor (--downsample)"
+        );
+    }
 
     const SENSOR: SensorSize = SensorSize::new(21, 13);
 
@@ -410,6 +545,18 @@ mod tests {
             VoxelGrid::new(SensorSize::new(0, 5), 2),
             Err(VoxelError::EmptySensor { .. })
         ));
+        assert_eq!(
+            VoxelGrid::downsampled(SENSOR, 2, 0).unwrap_err(),
+            VoxelError::ZeroDownsample
+        );
+    }
+
+    #[test]
+    fn a_downsampled_grid_is_the_binned_sensor_padded() {
+        let grid = VoxelGrid::downsampled(SensorSize::new(1280, 720), 2, 2).unwrap();
+        assert_eq!(grid.shape(), [2, 368, 640]);
+        assert_eq!(grid.sensor(), SensorSize::new(1280, 720));
+        assert_eq!(grid.downsample(), 2);
     }
 
     fn arbitrary_events() -> impl Strategy<Value = Vec<Event>> {
@@ -441,6 +588,34 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn a_downsampled_cell_holds_the_sum_of_its_pixels(
+            events in arbitrary_events(),
+            bins in 1usize..5,
+            factor in 1u16..5,
+        ) {
+            let mut per_pixel = VoxelGrid::new(SENSOR, bins).unwrap();
+            per_pixel.accumulate(&events, window());
+            let mut binned = VoxelGrid::downsampled(SENSOR, bins, factor).unwrap();
+            binned.accumulate(&events, window());
+            let [_, pixel_rows, pixel_stride] = per_pixel.shape();
+            let [_, cell_rows, cell_stride] = binned.shape();
+            let mut expected = vec![0.0f32; binned.as_slice().len()];
+            let factor = usize::from(factor);
+            for bin in 0..bins {
+                for y in 0..usize::from(SENSOR.height) {
+                    for x in 0..usize::from(SENSOR.width) {
+                        let value = per_pixel.as_slice()[(bin * pixel_rows + y) * pixel_stride + x];
+                        expected[(bin * cell_rows + y / factor) * cell_stride + x / factor] += value;
+                    }
+                }
+            }
+            for (cell, want) in binned.as_slice().iter().zip(&expected) {
+                prop_assert!((cell - want).abs() < 1e-4, "{} against {}", cell, want);
+            }
+            prop_assert_eq!(binned.counts(), per_pixel.counts());
+        }
+
         #[test]
         fn total_equals_on_minus_off(events in arbitrary_events(), bins in 1usize..5) {
             let mut grid = VoxelGrid::new(SENSOR, bins).unwrap();

@@ -6,11 +6,12 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use evgate_core::bitset::{bit, words_for};
 use evgate_core::{
     events_in, BitMask, ForecastView, GateError, GateMode, MaskError, SensorSize, TimeSpan,
-    VoxelError, VoxelGrid, WindowError,
+    VoxelError, WindowError, PADDING_MULTIPLE,
 };
-use evgate_model::{ModelError, ModelRuntime};
+use evgate_model::{ForecastError, Forecaster, ModelError};
 use thiserror::Error;
 
 use crate::binned::{BinnedMeans, LogBins, EVENT_BINS_FIRST_DECADE, EVENT_BINS_LAST_DECADE};
@@ -19,11 +20,9 @@ use crate::config::{ConfigError, EvalConfig};
 use crate::event_scores::EventConfusion;
 use crate::instances::match_instances;
 use crate::kept::KeptCounts;
-use crate::linear::extrapolate;
 use crate::method::{MethodInfo, MethodKind};
-use crate::oms::{
-    event_presence, normalised_response, oms_mask, threshold_response, OmsParameters,
-};
+use crate::method_output::{to_mask, MethodOutput, ReferenceInputs};
+use crate::oms::{event_presence, normalised_response, threshold_response, OmsParameters};
 use crate::onnx_parameters::{onnx_parameters, OnnxParametersError};
 use crate::recording::{GroundTruth, Recording};
 use crate::report::{
@@ -40,6 +39,11 @@ pub enum HarnessError {
     Model {
         path: PathBuf,
         source: Box<ModelError>,
+    },
+    #[error("model {path}: {source}")]
+    Forecast {
+        path: PathBuf,
+        source: Box<ForecastError>,
     },
     #[error("{sequence}: voxel grid: {source}")]
     Voxel {
@@ -79,14 +83,8 @@ pub enum HarnessError {
 /// A loaded network and the name it is reported under.
 pub struct LoadedModel {
     pub label: String,
-    pub runtime: ModelRuntime,
-}
-
-/// The masks one method produced for one reference time.
-struct MethodOutput {
-    current: Vec<bool>,
-    futures: Vec<Vec<bool>>,
-    runtime: Duration,
+    /// The network with the model's own threshold, unbinned: what `evgate-infer` runs.
+    pub forecaster: Forecaster,
 }
 
 /// Everything the scorer needs about one reference time.
@@ -131,16 +129,16 @@ impl Evaluation {
             MethodInfo::linear(&config, source.as_deref()),
         ];
         for (index, model) in models.iter().enumerate() {
-            let metadata = model.runtime.metadata();
+            let runtime = model.forecaster.runtime();
             let mut method = MethodInfo::model(
                 index,
                 &model.label,
-                model.runtime.model_path(),
-                metadata,
+                runtime.model_path(),
+                runtime.metadata(),
                 &config,
             );
             if let Some(info) = method.model.as_mut() {
-                info.parameters = Some(onnx_parameters(model.runtime.model_path())?);
+                info.parameters = Some(onnx_parameters(runtime.model_path())?);
             }
             methods.push(method);
         }
@@ -192,17 +190,18 @@ impl Evaluation {
     ) -> Result<&SequenceResult, HarnessError> {
         let name = recording.name.as_str();
         let size = recording.sensor_size;
-        let mut voxel = VoxelGrid::new(size, 2).map_err(|source| HarnessError::Voxel {
-            sequence: name.to_owned(),
-            source,
-        })?;
+        let padded = size
+            .padded_to(PADDING_MULTIPLE)
+            .ok_or(HarnessError::Voxel {
+                sequence: name.to_owned(),
+                source: VoxelError::SensorTooLarge { sensor: size },
+            })?;
         // A model exported for a smaller input than this sensor's cannot see it: it sits this
         // recording out (and so do the baselines built on the first model's mask).
         let mut models_not_run = Vec::new();
         let mut runs_here = Vec::with_capacity(self.models.len());
         for model in &mut self.models {
-            let input = model.runtime.input_size();
-            let padded = voxel.padded();
+            let input = model.forecaster.runtime().input_size();
             let fits = input.width >= padded.width && input.height >= padded.height;
             runs_here.push(fits);
             if !fits {
@@ -213,11 +212,12 @@ impl Evaluation {
                 });
                 continue;
             }
+            let path = model.forecaster.runtime().model_path().to_path_buf();
             model
-                .runtime
+                .forecaster
                 .reset_state()
                 .map_err(|source| HarnessError::Model {
-                    path: model.runtime.model_path().to_path_buf(),
+                    path,
                     source: Box::new(source),
                 })?;
         }
@@ -265,30 +265,28 @@ impl Evaluation {
             );
 
             // The recurrent state must see every window, even one we cannot score.
-            voxel.clear();
-            voxel.accumulate(window, span);
-            voxel.normalise();
             let mut model_outputs = Vec::with_capacity(self.models.len());
             for (model, &runs) in self.models.iter_mut().zip(&runs_here) {
                 if !runs {
                     model_outputs.push(None);
                     continue;
                 }
-                let input = fit_to_model(&voxel, model.runtime.input_size());
-                let output =
-                    model
-                        .runtime
-                        .forecast(&input, &horizons_ms_f32)
-                        .map_err(|source| HarnessError::Model {
-                            path: model.runtime.model_path().to_path_buf(),
-                            source: Box::new(source),
-                        })?;
-                let stride = output.width();
-                let crop = |logits: &[f32]| crop_logits(logits, stride, size);
+                let path = model.forecaster.runtime().model_path().to_path_buf();
+                let forecast = model
+                    .forecaster
+                    .forecast(size, window, span, &horizons_ms_f32)
+                    .map_err(|source| HarnessError::Forecast {
+                        path,
+                        source: Box::new(source),
+                    })?;
                 model_outputs.push(Some(MethodOutput {
-                    current: crop(output.mask_logits()),
-                    futures: output.future_mask_logits().map(crop).collect(),
-                    runtime: output.inference_time(),
+                    current: forecast.current.view().to_bools(),
+                    futures: forecast
+                        .futures
+                        .iter()
+                        .map(|mask| mask.view().to_bools())
+                        .collect(),
+                    runtime: forecast.inference,
                 }));
             }
 
@@ -315,66 +313,23 @@ impl Evaluation {
                 (None, Some(now)) => Some((to_mask(now), Duration::ZERO)),
                 (None, None) => None,
             };
-            let mut outputs: Vec<Option<MethodOutput>> = Vec::with_capacity(self.methods.len());
-            for method in &self.methods {
-                let output = match method.kind {
-                    MethodKind::Oms(parameters) => {
-                        let started = Instant::now();
-                        let mask = oms_mask(window, size, &parameters);
-                        let runtime = started.elapsed();
-                        Some(MethodOutput {
-                            futures: vec![mask.clone(); horizons_us.len()],
-                            current: mask,
-                            runtime,
-                        })
-                    }
-                    MethodKind::NoForecast => {
-                        current_source
-                            .as_ref()
-                            .map(|(current, runtime)| MethodOutput {
-                                futures: vec![current.clone(); horizons_us.len()],
-                                current: current.clone(),
-                                runtime: *runtime,
-                            })
-                    }
-                    MethodKind::Linear => current_source.as_ref().map(|(current, runtime)| {
-                        let started = Instant::now();
-                        let (previous_us, previous) = previous_current
-                            .as_ref()
-                            .map_or((reference_us, current), |(t, m)| (*t, m));
-                        let futures = extrapolate(
-                            previous,
-                            current,
-                            size,
-                            reference_us - previous_us,
-                            &horizons_us,
-                            config.linear_max_match_distance_px,
-                        );
-                        MethodOutput {
-                            futures,
-                            current: current.clone(),
-                            runtime: *runtime + started.elapsed(),
-                        }
-                    }),
-                    MethodKind::Model(index) => {
-                        model_outputs[index].as_ref().map(|output| MethodOutput {
-                            current: output.current.clone(),
-                            futures: output.futures.clone(),
-                            runtime: output.runtime,
-                        })
-                    }
-                    MethodKind::Oracle => now.map(|now| MethodOutput {
-                        current: to_mask(now),
-                        futures: truth
-                            .at_horizon
-                            .iter()
-                            .map(|t| t.map_or_else(|| vec![false; size.pixels()], to_mask))
-                            .collect(),
-                        runtime: Duration::ZERO,
-                    }),
-                };
-                outputs.push(output);
-            }
+            let inputs = ReferenceInputs {
+                config: &config,
+                size,
+                reference_us,
+                horizons_us: &horizons_us,
+                window,
+                current: current_source.as_ref(),
+                previous: previous_current.as_ref(),
+                models: &model_outputs,
+                truth_now: now,
+                truth_at_horizon: &truth.at_horizon,
+            };
+            let outputs: Vec<Option<MethodOutput>> = self
+                .methods
+                .iter()
+                .map(|method| method.kind.output(&inputs))
+                .collect();
             previous_current = current_source.map(|(current, _)| (reference_us, current));
 
             let gated = gated_events(recording, reference_us, gate_span_us);
@@ -713,11 +668,10 @@ fn score_events(
     let horizons: Vec<i64> = gating_horizons.iter().map(|&k| horizons_us[k]).collect();
     let view =
         ForecastView::new(reference_us, &horizons, size, &words).map_err(GatingError::Gate)?;
-    let word_count = events.len().div_ceil(64);
+    let word_count = words_for(events.len());
     let (mut keep, mut judged) = (vec![0u64; word_count], vec![0u64; word_count]);
     view.keep_bitmap(events, GateMode::KeepMovingObjects, &mut keep, &mut judged)
         .map_err(GatingError::Gate)?;
-    let bit = |words: &[u64], i: usize| words[i / 64] >> (i % 64) & 1 == 1;
     for i in (0..events.len()).filter(|&i| bit(&judged, i)) {
         let kept = bit(&keep, i);
         scores.kept.judged += 1;
@@ -727,38 +681,6 @@ fn score_events(
         }
     }
     Ok(scores)
-}
-
-/// The voxel grid as the model's input: zero-padded at the right and bottom when the model was
-/// exported for a larger input than the sensor's padded size (the contract's own padding).
-fn fit_to_model(voxel: &VoxelGrid, input: SensorSize) -> std::borrow::Cow<'_, [f32]> {
-    let padded = voxel.padded();
-    if padded == input {
-        return std::borrow::Cow::Borrowed(voxel.as_slice());
-    }
-    let (from_width, to_width) = (usize::from(padded.width), usize::from(input.width));
-    let mut fitted = vec![0.0; voxel.bins() * input.pixels()];
-    for (bin, plane) in voxel.as_slice().chunks(padded.pixels()).enumerate() {
-        let target = &mut fitted[bin * input.pixels()..(bin + 1) * input.pixels()];
-        for (row, values) in plane.chunks(from_width).enumerate() {
-            target[row * to_width..row * to_width + from_width].copy_from_slice(values);
-        }
-    }
-    std::borrow::Cow::Owned(fitted)
-}
-
-fn to_mask(ids: &[u8]) -> Vec<bool> {
-    ids.iter().map(|&id| id != 0).collect()
-}
-
-/// The sensor-sized top-left corner of a padded logit plane, thresholded at 0 (sigmoid > 0.5).
-fn crop_logits(logits: &[f32], row_stride: usize, size: SensorSize) -> Vec<bool> {
-    let width = usize::from(size.width);
-    logits
-        .chunks(row_stride)
-        .take(usize::from(size.height))
-        .flat_map(|row| row[..width].iter().map(|&l| l > 0.0))
-        .collect()
 }
 
 #[cfg(test)]
@@ -1034,27 +956,6 @@ mod tests {
             report.overall["no-forecast"].at(0).unwrap().mean_iou,
             Some(1.0)
         );
-    }
-
-    #[test]
-    fn a_larger_model_input_gets_the_grid_zero_padded() {
-        let mut voxel = VoxelGrid::new(SensorSize::new(16, 16), 2).unwrap();
-        voxel.accumulate(
-            &[evgate_core::Event::new(10, 15, 15, true)],
-            TimeSpan::new(0, 20).unwrap(),
-        );
-        let fitted = fit_to_model(&voxel, SensorSize::new(32, 32));
-        assert_eq!(fitted.len(), 2 * 32 * 32);
-        let sum_of = |values: &[f32]| values.iter().map(|v| v.abs()).sum::<f32>();
-        assert!(sum_of(voxel.as_slice()) > 0.0);
-        assert_eq!(sum_of(&fitted), sum_of(voxel.as_slice()));
-        for bin in 0..2 {
-            for row in 0..16 {
-                let source = &voxel.as_slice()[bin * 256 + row * 16..bin * 256 + row * 16 + 16];
-                let target = &fitted[bin * 1024 + row * 32..bin * 1024 + row * 32 + 16];
-                assert_eq!(source, target);
-            }
-        }
     }
 
     #[test]

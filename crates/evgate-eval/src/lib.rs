@@ -21,6 +21,7 @@ pub mod kept;
 pub mod linear;
 pub mod markdown;
 pub mod method;
+mod method_output;
 pub mod model_tables;
 pub mod oms;
 pub mod onnx_parameters;

@@ -326,7 +326,7 @@ mod tests {
         counted("model:XS", &mut report, 558_793);
         // The S file is another architecture than the table's S row: no GFLOPs from it.
         counted("model:S", &mut report, 325_880);
-        let mismatched = table.apply(&mut report, Path::new("models/reports/flops.json"));
+        let mismatched = table.apply(&mut report, Path::new("evidence/models/flops.json"));
         assert_eq!(mismatched, ["model:S"]);
         let text = sizes(&report, &[true, true]);
         let xs = text.find("| `model:XS`").unwrap();
@@ -340,7 +340,7 @@ mod tests {
             text.contains("| L | ✓ (position-aware) | – | – | – |"),
             "{text}"
         );
-        assert!(text.contains("`models/reports/flops.json`"));
+        assert!(text.contains("`evidence/models/flops.json`"));
     }
 
     #[test]

@@ -54,27 +54,51 @@ impl Aedat4Decoder {
         mut source: ByteSource,
         sensor_size: Option<SensorSize>,
     ) -> Result<Self, DecodeError> {
+        let magic = source
+            .read_exact(MAGIC.len(), "the AEDAT 4 magic")?
+            .to_vec();
+        if magic != MAGIC {
+            return Err(DecodeError::BadHeader {
+                path: source.path().to_path_buf(),
+                offset: 0,
+                problem: format!(
+                    "magic {:?} is not {:?}",
+                    String::from_utf8_lossy(&magic),
+                    "#!AER-DAT4.0\\r\\n"
+                ),
+            });
+        }
+        Self::after_magic(source, sensor_size)
+    }
+
+    /// Reads the header of an AEDAT 4 network stream (dv-processing's `NetworkWriter`, the DV
+    /// runtime's network outputs): a file without its magic line and data table, so `source`
+    /// starts at the header's length.
+    pub fn network_stream(
+        source: ByteSource,
+        sensor_size: Option<SensorSize>,
+    ) -> Result<Self, DecodeError> {
+        Self::after_magic(source, sensor_size)
+    }
+
+    fn after_magic(
+        mut source: ByteSource,
+        sensor_size: Option<SensorSize>,
+    ) -> Result<Self, DecodeError> {
         let path = source.path().to_path_buf();
         let bad = |offset: u64, problem: String| DecodeError::BadHeader {
             path: path.clone(),
             offset,
             problem,
         };
-        let magic = source.read_exact(MAGIC.len(), "the AEDAT 4 magic")?;
-        if magic != MAGIC {
-            return Err(bad(
-                0,
-                format!(
-                    "magic {:?} is not {:?}",
-                    String::from_utf8_lossy(magic),
-                    "#!AER-DAT4.0\\r\\n"
-                ),
-            ));
-        }
+        let length_offset = source.offset();
         let length_bytes = source.read_exact(4, "the AEDAT 4 header length")?;
         let length = u32::from_le_bytes(length_bytes.try_into().expect("4 bytes")) as usize;
         if length > MAX_PACKET_BYTES {
-            return Err(bad(14, format!("header length {length} is implausible")));
+            return Err(bad(
+                length_offset,
+                format!("header length {length} is implausible"),
+            ));
         }
         let header_offset = source.offset();
         let header = source.read_exact(length, "the AEDAT 4 header")?.to_vec();

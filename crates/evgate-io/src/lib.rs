@@ -7,6 +7,7 @@
 //! [`report`]). Writing: [`create`] picks an [`EventWriter`] by extension.
 
 pub mod aedat4;
+pub mod aedat4_stream_writer;
 pub mod csv;
 pub mod csv_writer;
 pub mod dat;
@@ -24,6 +25,7 @@ pub mod format;
 pub mod header;
 pub mod native;
 pub mod native_writer;
+pub mod network;
 pub mod npy;
 pub mod npz;
 pub mod pickle;

@@ -33,7 +33,8 @@ impl BatchFlags {
     /// Events were lost before this batch (a publisher discarded batches for a slow reader, or
     /// the source itself reported a gap). Readers also detect it from `first_event_index`.
     pub const GAP_DETECTED: u32 = 1 << 1;
-    /// The source restarted from its beginning (looping replay): event times jump back.
+    /// The source restarted from its beginning (looping replay): the scene jumps, while event
+    /// times go on increasing (each pass is shifted by the source's span).
     pub const STREAM_RESTARTED: u32 = 1 << 2;
 }
 
@@ -64,7 +65,9 @@ pub struct BatchHeader {
     /// CLOCK_MONOTONIC of the moment the input batch was published, nanoseconds
     /// (see [`crate::clock::monotonic_ns`]); end-to-end latency is measured from it.
     pub published_at_monotonic_ns: u64,
+    /// Sensor width in pixels: every event's x is below it.
     pub width: u16,
+    /// Sensor height in pixels: every event's y is below it.
     pub height: u16,
     /// [`BatchFlags`] bits.
     pub flags: u32,
@@ -73,18 +76,22 @@ pub struct BatchHeader {
 const _: () = assert!(core::mem::size_of::<BatchHeader>() == 64);
 
 impl BatchHeader {
+    /// The sensor size, `width` × `height`.
     pub const fn sensor(&self) -> SensorSize {
         SensorSize::new(self.width, self.height)
     }
 
+    /// The last batch of its stream: nothing follows (it may hold no events).
     pub const fn is_end_of_stream(&self) -> bool {
         self.flags & BatchFlags::END_OF_STREAM != 0
     }
 
+    /// Events were lost before this batch.
     pub const fn has_gap(&self) -> bool {
         self.flags & BatchFlags::GAP_DETECTED != 0
     }
 
+    /// The source started over (looping replay): the scene jumps, event time goes on.
     pub const fn is_restart(&self) -> bool {
         self.flags & BatchFlags::STREAM_RESTARTED != 0
     }
@@ -129,11 +136,6 @@ impl BatchHeader {
         }
         Ok(())
     }
-}
-
-/// Number of `u64` words of a keep bitmap for `event_count` events (bit `i % 64` of word `i / 64`).
-pub const fn bitmap_words(event_count: usize) -> usize {
-    event_count.div_ceil(64)
 }
 
 #[cfg(test)]
@@ -195,12 +197,5 @@ mod tests {
             };
             assert!(matches!(span.validate(3), Err(BatchError::Span { .. })));
         }
-    }
-
-    #[test]
-    fn bitmap_words_round_up() {
-        assert_eq!(bitmap_words(0), 0);
-        assert_eq!(bitmap_words(64), 1);
-        assert_eq!(bitmap_words(65), 2);
     }
 }

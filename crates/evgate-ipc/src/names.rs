@@ -63,7 +63,9 @@ impl Stream {
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub struct PipelineNames {
+    /// The first part of every service name (`--domain` of the services).
     pub domain: String,
+    /// The second part of every service name (`--camera` of the services).
     pub camera: String,
 }
 

@@ -6,12 +6,13 @@ use std::mem::MaybeUninit;
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::port::listener::{Listener, ListenerCreateError};
+use iceoryx2::port::notifier::{Notifier, NotifierCreateError, NotifierNotifyError};
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
+use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
+use iceoryx2::port::{LoanError, SendError};
 use iceoryx2::prelude::{AllocationStrategy, IceoryxSend, Node, ServiceName, ZeroCopySend};
 use iceoryx2::sample::Sample;
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
@@ -29,39 +30,77 @@ use crate::slice_writer::SliceWriter;
 use crate::stale_service::{remove_orphaned_static_config, StaleServiceError};
 use crate::Service;
 
-/// Port failures; every variant names the service.
+/// Why a port (a publisher, subscriber, notifier or listener) could not be opened; every
+/// variant names the service and keeps iceoryx2's error.
 #[derive(Debug, thiserror::Error)]
-pub enum PortError {
+pub enum OpenError {
     #[error(transparent)]
     Name(#[from] NameError),
     #[error(transparent)]
     StaleService(#[from] StaleServiceError),
-    #[error("cannot open or create service {service:?} ({pattern}): {reason}")]
-    Service {
-        service: String,
-        pattern: &'static str,
-        reason: String,
-    },
-    #[error("cannot create {port} on service {service:?}: {reason}")]
-    Port {
-        service: String,
-        port: &'static str,
-        reason: String,
-    },
     #[error("qos field buffer-size = {value} is out of range: accepted 1..={max}")]
     BufferSize { value: usize, max: usize },
-    #[error("cannot loan a slice of {len} elements on service {service:?}: {reason}")]
+    #[error("cannot open or create publish-subscribe service {service:?}: {source}")]
+    PublishSubscribe {
+        service: String,
+        source: PublishSubscribeOpenOrCreateError,
+    },
+    #[error("cannot open or create event service {service:?}: {source}")]
+    Event {
+        service: String,
+        source: EventOpenOrCreateError,
+    },
+    #[error("cannot create a publisher on service {service:?}: {source}")]
+    Publisher {
+        service: String,
+        source: PublisherCreateError,
+    },
+    #[error("cannot create a subscriber on service {service:?}: {source}")]
+    Subscriber {
+        service: String,
+        source: SubscriberCreateError,
+    },
+    #[error("cannot create a notifier on service {service:?}: {source}")]
+    Notifier {
+        service: String,
+        source: NotifierCreateError,
+    },
+    #[error("cannot create a listener on service {service:?}: {source}")]
+    Listener {
+        service: String,
+        source: ListenerCreateError,
+    },
+}
+
+/// Why a sample could not be published.
+#[derive(Debug, thiserror::Error)]
+pub enum PublishError {
+    #[error("cannot loan a slice of {len} elements on service {service:?}: {source}")]
     Loan {
         service: String,
         len: usize,
-        reason: String,
+        source: LoanError,
     },
-    #[error("cannot send on service {service:?}: {reason}")]
-    Send { service: String, reason: String },
-    #[error("cannot receive on service {service:?}: {reason}")]
-    Receive { service: String, reason: String },
-    #[error("cannot notify listeners of service {service:?}: {reason}")]
-    Notify { service: String, reason: String },
+    #[error("cannot send on service {service:?}: {source}")]
+    Send { service: String, source: SendError },
+    #[error("cannot notify the listeners of service {service:?}: {source}")]
+    Notify {
+        service: String,
+        source: NotifierNotifyError,
+    },
+    #[error("cannot connect new subscribers of service {service:?}: {source}")]
+    Connections {
+        service: String,
+        source: ConnectionFailure,
+    },
+}
+
+/// Why a sample could not be received.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot receive on service {service:?}: {source}")]
+pub struct ReceiveError {
+    service: String,
+    source: iceoryx2::port::ReceiveError,
 }
 
 /// How one publication went.
@@ -91,50 +130,46 @@ fn wants_latest(stream: Stream) -> bool {
     matches!(stream, Stream::Forecast | Stream::Stats)
 }
 
-fn service_error(service: &ServiceName, pattern: &'static str, reason: impl Debug) -> PortError {
-    PortError::Service {
-        service: service.as_str().to_owned(),
-        pattern,
-        reason: format!("{reason:?}"),
+fn name_of(service: &ServiceName) -> String {
+    service.as_str().to_owned()
+}
+
+impl OpenError {
+    fn publisher(service: &ServiceName) -> impl FnOnce(PublisherCreateError) -> Self + '_ {
+        move |source| Self::Publisher {
+            service: name_of(service),
+            source,
+        }
+    }
+
+    fn subscriber(service: &ServiceName) -> impl FnOnce(SubscriberCreateError) -> Self + '_ {
+        move |source| Self::Subscriber {
+            service: name_of(service),
+            source,
+        }
     }
 }
 
-fn port_error(service: &ServiceName, port: &'static str, reason: impl Debug) -> PortError {
-    PortError::Port {
-        service: service.as_str().to_owned(),
-        port,
-        reason: format!("{reason:?}"),
-    }
-}
-
-fn send_error(service: &ServiceName, reason: impl Debug) -> PortError {
-    PortError::Send {
-        service: service.as_str().to_owned(),
-        reason: format!("{reason:?}"),
-    }
-}
-
-fn receive_error(service: &ServiceName, reason: impl Debug) -> PortError {
-    PortError::Receive {
-        service: service.as_str().to_owned(),
-        reason: format!("{reason:?}"),
+impl PublishError {
+    fn send(service: &ServiceName) -> impl FnOnce(SendError) -> Self + '_ {
+        move |source| Self::Send {
+            service: name_of(service),
+            source,
+        }
     }
 }
 
 /// Opens or creates a service with `open_or_create`; when that finds the service stuck in
 /// creation, removes what a dead creator left (its dead node, then a static config no live node
 /// is creating) and tries once more.
-fn open_or_recover<F, E: Debug>(
+fn open_or_recover<F, E>(
     node: &Node<Service>,
     name: &ServiceName,
     pattern: MessagingPattern,
     hangs_in_creation: impl Fn(&E) -> bool,
     open_or_create: impl Fn() -> Result<F, E>,
-) -> Result<F, PortError> {
-    let pattern_name = match pattern {
-        MessagingPattern::Event => "event",
-        _ => "publish-subscribe",
-    };
+    failed: impl Fn(String, E) -> OpenError,
+) -> Result<F, OpenError> {
     match open_or_create() {
         Err(error) if hangs_in_creation(&error) => {
             // A dead creator that finished its static config but not the rest is removed by
@@ -142,19 +177,19 @@ fn open_or_recover<F, E: Debug>(
             let cleaned_dead_nodes = node.try_cleanup_dead_nodes().cleanups > 0;
             let removed_static_config = remove_orphaned_static_config(node, name, pattern)?;
             if !cleaned_dead_nodes && !removed_static_config {
-                return Err(service_error(name, pattern_name, error));
+                return Err(failed(name_of(name), error));
             }
             open_or_create()
         }
         outcome => outcome,
     }
-    .map_err(|error| service_error(name, pattern_name, error))
+    .map_err(|error| failed(name_of(name), error))
 }
 
 fn open_wakeup_service(
     node: &Node<Service>,
     name: &ServiceName,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<Service>, PortError> {
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Service>, OpenError> {
     open_or_recover(
         node,
         name,
@@ -171,6 +206,7 @@ fn open_wakeup_service(
                 .max_nodes(ServiceLimits::MAX_NODES)
                 .open_or_create()
         },
+        |service, source| OpenError::Event { service, source },
     )
 }
 
@@ -179,7 +215,7 @@ fn open_or_recover_publish_subscribe<F>(
     node: &Node<Service>,
     name: &ServiceName,
     open_or_create: impl Fn() -> Result<F, PublishSubscribeOpenOrCreateError>,
-) -> Result<F, PortError> {
+) -> Result<F, OpenError> {
     open_or_recover(
         node,
         name,
@@ -193,36 +229,43 @@ fn open_or_recover_publish_subscribe<F>(
             )
         },
         open_or_create,
+        |service, source| OpenError::PublishSubscribe { service, source },
     )
 }
 
-fn open_notifier(node: &Node<Service>, name: &ServiceName) -> Result<Notifier<Service>, PortError> {
+fn open_notifier(node: &Node<Service>, name: &ServiceName) -> Result<Notifier<Service>, OpenError> {
     open_wakeup_service(node, name)?
         .notifier_builder()
         .create()
-        .map_err(|error| port_error(name, "notifier", error))
-}
-
-fn open_listener(node: &Node<Service>, name: &ServiceName) -> Result<Listener<Service>, PortError> {
-    open_wakeup_service(node, name)?
-        .listener_builder()
-        .create()
-        .map_err(|error| port_error(name, "listener", error))
-}
-
-fn wake_readers(notifier: &Notifier<Service>, service: &ServiceName) -> Result<(), PortError> {
-    notifier
-        .notify()
-        .map(|_| ())
-        .map_err(|error| PortError::Notify {
-            service: service.as_str().to_owned(),
-            reason: format!("{error:?}"),
+        .map_err(|source| OpenError::Notifier {
+            service: name_of(name),
+            source,
         })
 }
 
-fn check_buffer_size(qos: &Qos) -> Result<(), PortError> {
+fn open_listener(node: &Node<Service>, name: &ServiceName) -> Result<Listener<Service>, OpenError> {
+    open_wakeup_service(node, name)?
+        .listener_builder()
+        .create()
+        .map_err(|source| OpenError::Listener {
+            service: name_of(name),
+            source,
+        })
+}
+
+fn wake_readers(notifier: &Notifier<Service>, service: &ServiceName) -> Result<(), PublishError> {
+    notifier
+        .notify()
+        .map(|_| ())
+        .map_err(|source| PublishError::Notify {
+            service: name_of(service),
+            source,
+        })
+}
+
+fn check_buffer_size(qos: &Qos) -> Result<(), OpenError> {
     if qos.buffer_size == 0 || qos.buffer_size > ServiceLimits::SUBSCRIBER_MAX_BUFFER {
-        return Err(PortError::BufferSize {
+        return Err(OpenError::BufferSize {
             value: qos.buffer_size,
             max: ServiceLimits::SUBSCRIBER_MAX_BUFFER,
         });
@@ -288,7 +331,7 @@ fn open_slice_service<T, H>(
     node: &Node<Service>,
     name: &ServiceName,
     stream: Stream,
-) -> Result<PortFactory<Service, [T], H>, PortError>
+) -> Result<PortFactory<Service, [T], H>, OpenError>
 where
     T: Debug + ZeroCopySend + 'static,
     H: Debug + ZeroCopySend + 'static,
@@ -313,7 +356,7 @@ where
         names: &PipelineNames,
         stream: Stream,
         qos: &Qos,
-    ) -> Result<Self, PortError> {
+    ) -> Result<Self, OpenError> {
         let service_name = names.service(stream)?;
         let service = open_slice_service::<T, H>(node, &service_name, stream)?;
         let builder = service
@@ -329,7 +372,7 @@ where
         };
         let publisher = builder
             .create()
-            .map_err(|error| port_error(&service_name, "publisher", error))?;
+            .map_err(OpenError::publisher(&service_name))?;
         let notifier = open_notifier(node, &service_name)?;
         Ok(Self {
             service_name,
@@ -346,10 +389,13 @@ where
 
     /// Connects new subscribers and hands them the history (the latest forecast); sending does
     /// this too, so only an idle publisher needs to call it.
-    pub fn update_connections(&self) -> Result<(), PortError> {
+    pub fn update_connections(&self) -> Result<(), PublishError> {
         self.publisher
             .update_connections()
-            .map_err(|error| port_error(&self.service_name, "publisher connections", error))
+            .map_err(|source| PublishError::Connections {
+                service: name_of(&self.service_name),
+                source,
+            })
     }
 
     /// Subscribers currently connected.
@@ -358,7 +404,7 @@ where
     }
 
     /// Publishes a copy of `items` (one memcpy into shared memory).
-    pub fn publish(&self, header: H, items: &[T]) -> Result<Delivery, PortError> {
+    pub fn publish(&self, header: H, items: &[T]) -> Result<Delivery, PublishError> {
         let sample = self.loan(header, items.len())?;
         self.send(sample.write_from_slice(items))
     }
@@ -373,7 +419,7 @@ where
         header: H,
         items: &[T],
         deadline: Instant,
-    ) -> Result<Delivery, PortError> {
+    ) -> Result<Delivery, PublishError> {
         loop {
             let delivery = self.publish(header, items)?;
             if delivery.undelivered == 0 {
@@ -394,7 +440,7 @@ where
         header: H,
         len: usize,
         fill: impl FnOnce(&mut SliceWriter<'_, T>),
-    ) -> Result<WrittenDelivery, PortError> {
+    ) -> Result<WrittenDelivery, PublishError> {
         let mut sample = self.loan(header, len)?;
         let mut writer = SliceWriter::new(sample.payload_mut());
         fill(&mut writer);
@@ -414,11 +460,15 @@ where
         &self,
         header: H,
         len: usize,
-    ) -> Result<SampleMutUninit<Service, [MaybeUninit<T>], H>, PortError> {
-        let mut sample = self
-            .publisher
-            .loan_slice_uninit(len)
-            .map_err(|error| self.loan_error(len, error))?;
+    ) -> Result<SampleMutUninit<Service, [MaybeUninit<T>], H>, PublishError> {
+        let mut sample =
+            self.publisher
+                .loan_slice_uninit(len)
+                .map_err(|source| PublishError::Loan {
+                    service: name_of(&self.service_name),
+                    len,
+                    source,
+                })?;
         *sample.user_header_mut() = header;
         Ok(sample)
     }
@@ -429,29 +479,21 @@ where
         header: H,
         len: usize,
         fill: impl FnOnce(&mut [T]),
-    ) -> Result<Delivery, PortError> {
+    ) -> Result<Delivery, PublishError> {
         let sample = self.loan(header, len)?;
         let mut sample = sample.write_from_fn(|_| T::zeroed());
         fill(sample.payload_mut());
         self.send(sample)
     }
 
-    fn loan_error(&self, len: usize, error: impl Debug) -> PortError {
-        PortError::Loan {
-            service: self.service_name.as_str().to_owned(),
-            len,
-            reason: format!("{error:?}"),
-        }
-    }
-
     fn send(
         &self,
         sample: iceoryx2::sample_mut::SampleMut<Service, [T], H>,
-    ) -> Result<Delivery, PortError> {
+    ) -> Result<Delivery, PublishError> {
         let subscribers = self.subscriber_count();
         let recipients = sample
             .send()
-            .map_err(|error| send_error(&self.service_name, error))?;
+            .map_err(PublishError::send(&self.service_name))?;
         wake_readers(&self.notifier, &self.service_name)?;
         Ok(Delivery {
             recipients,
@@ -483,7 +525,7 @@ where
         names: &PipelineNames,
         stream: Stream,
         qos: &Qos,
-    ) -> Result<Self, PortError> {
+    ) -> Result<Self, OpenError> {
         check_buffer_size(qos)?;
         let service_name = names.service(stream)?;
         let service = open_slice_service::<T, H>(node, &service_name, stream)?;
@@ -498,7 +540,7 @@ where
         let listener = open_listener(node, &service_name)?;
         let subscriber = builder
             .create()
-            .map_err(|error| port_error(&service_name, "subscriber", error))?;
+            .map_err(OpenError::subscriber(&service_name))?;
         Ok(Self {
             service_name,
             subscriber,
@@ -512,10 +554,11 @@ where
     }
 
     /// The next waiting sample, if any.
-    pub fn receive(&self) -> Result<Option<Sample<Service, [T], H>>, PortError> {
-        self.subscriber
-            .receive()
-            .map_err(|error| receive_error(&self.service_name, error))
+    pub fn receive(&self) -> Result<Option<Sample<Service, [T], H>>, ReceiveError> {
+        self.subscriber.receive().map_err(|source| ReceiveError {
+            service: name_of(&self.service_name),
+            source,
+        })
     }
 
     /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`.
@@ -534,7 +577,7 @@ where
 fn open_value_service<T>(
     node: &Node<Service>,
     name: &ServiceName,
-) -> Result<PortFactory<Service, T, ()>, PortError>
+) -> Result<PortFactory<Service, T, ()>, OpenError>
 where
     T: Debug + ZeroCopySend + 'static,
 {
@@ -556,13 +599,13 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestPublisher<T> {
         node: &Node<Service>,
         names: &PipelineNames,
         stream: Stream,
-    ) -> Result<Self, PortError> {
+    ) -> Result<Self, OpenError> {
         let service_name = names.service(stream)?;
         let publisher = open_value_service::<T>(node, &service_name)?
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
-            .map_err(|error| port_error(&service_name, "publisher", error))?;
+            .map_err(OpenError::publisher(&service_name))?;
         let notifier = open_notifier(node, &service_name)?;
         Ok(Self {
             service_name,
@@ -571,10 +614,10 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestPublisher<T> {
         })
     }
 
-    pub fn publish(&self, value: T) -> Result<(), PortError> {
+    pub fn publish(&self, value: T) -> Result<(), PublishError> {
         self.publisher
             .send_copy(value)
-            .map_err(|error| send_error(&self.service_name, error))?;
+            .map_err(PublishError::send(&self.service_name))?;
         wake_readers(&self.notifier, &self.service_name)
     }
 }
@@ -591,7 +634,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
         node: &Node<Service>,
         names: &PipelineNames,
         stream: Stream,
-    ) -> Result<Self, PortError> {
+    ) -> Result<Self, OpenError> {
         let service_name = names.service(stream)?;
         // Listener first, as in `SliceSubscriber::open`, so no wake-up is lost.
         let listener = open_listener(node, &service_name)?;
@@ -599,7 +642,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
             .subscriber_builder()
             .history_request(ServiceLimits::LATEST_HISTORY)
             .create()
-            .map_err(|error| port_error(&service_name, "subscriber", error))?;
+            .map_err(OpenError::subscriber(&service_name))?;
         Ok(Self {
             service_name,
             subscriber,
@@ -608,14 +651,13 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
     }
 
     /// The newest value received since the last call, draining older ones.
-    pub fn latest(&self) -> Result<Option<T>, PortError> {
+    pub fn latest(&self) -> Result<Option<T>, ReceiveError> {
         let _ = self.listener.try_wait(|_| {});
         let mut latest = None;
-        while let Some(sample) = self
-            .subscriber
-            .receive()
-            .map_err(|error| receive_error(&self.service_name, error))?
-        {
+        while let Some(sample) = self.subscriber.receive().map_err(|source| ReceiveError {
+            service: name_of(&self.service_name),
+            source,
+        })? {
             latest = Some(*sample.payload());
         }
         Ok(latest)

@@ -3,7 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 /// What a publisher does when a subscriber's buffer is full.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "service", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Overflow {
     /// Wait for the subscriber to make room, up to `block-timeout-ms`; after that the sample is

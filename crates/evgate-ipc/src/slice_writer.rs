@@ -85,6 +85,17 @@ impl<'a, T: Copy> SliceWriter<'a, T> {
     }
 }
 
+impl evgate_core::EventSink for SliceWriter<'_, evgate_core::Event> {
+    #[inline(always)]
+    fn push(&mut self, event: evgate_core::Event) {
+        SliceWriter::push(self, event);
+    }
+
+    fn extend_from_slice(&mut self, events: &[evgate_core::Event]) {
+        SliceWriter::extend_from_slice(self, events);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -43,16 +43,23 @@ pub struct PipelineStats {
     /// the stream began, else the first event of the first batch it received (a gate started
     /// mid-stream does not count what was published before it).
     pub joined_at_event_index: u64,
+    /// Events the source published since `joined_at_event_index`.
     pub input_events: u64,
+    /// Events a forecast judged and the mode passed.
     pub kept_events: u64,
+    /// Events a forecast judged and the mode held back.
     pub suppressed_events: u64,
+    /// Events no valid forecast judged, passed under `--no-forecast pass` (or `last-mask`).
     pub unjudged_passed_events: u64,
+    /// Events no valid forecast judged, held back under `--no-forecast drop`.
     pub unjudged_dropped_events: u64,
     /// Events published by the ingest that never reached the gate (back-pressure discards).
     pub dropped_events: u64,
+    /// Input batches gated.
     pub input_batches: u64,
     /// Holes detected in the input stream.
     pub gaps_detected: u64,
+    /// Forecasts received from the inference service.
     pub forecasts_received: u64,
     /// Forecasts that judged at least one event.
     pub forecasts_used: u64,

@@ -7,7 +7,7 @@
 //! its stream in the middle. Only SIGINT and SIGTERM, which iceoryx2 records as a termination
 //! request, stop an evgate service.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::prelude::{CallbackProgression, WaitSet, WaitSetAttachmentId};
@@ -27,6 +27,38 @@ pub fn stop_requested(node: &Node, cycle: Duration) -> bool {
             node.wait(Duration::ZERO),
             Err(NodeWaitFailure::TerminationRequest)
         ),
+    }
+}
+
+/// How often a loop that never sleeps (a flood, or busy-polling) looks for SIGINT/SIGTERM.
+/// The look is a zero-length `nanosleep`, a system call that the kernel's timer slack can
+/// stretch to tens of microseconds, so it is paced by time rather than done per batch.
+pub const STOP_CHECK_PERIOD: Duration = Duration::from_millis(5);
+
+/// Paces the stop checks of a loop that does not sleep: [`StopChecks::requested`] looks at
+/// most once per [`STOP_CHECK_PERIOD`] and costs a clock read otherwise.
+#[derive(Debug)]
+pub struct StopChecks {
+    next: Instant,
+}
+
+impl Default for StopChecks {
+    fn default() -> Self {
+        Self {
+            next: Instant::now(),
+        }
+    }
+}
+
+impl StopChecks {
+    /// True when SIGINT or SIGTERM asked the process to stop (looked at if a period passed).
+    pub fn requested(&mut self, node: &Node) -> bool {
+        let now = Instant::now();
+        if now < self.next {
+            return false;
+        }
+        self.next = now + STOP_CHECK_PERIOD;
+        stop_requested(node, Duration::ZERO)
     }
 }
 

@@ -5,6 +5,7 @@
 pub mod bound_state;
 pub mod contract;
 pub mod environment;
+pub mod forecaster;
 pub mod identity;
 pub mod library;
 pub mod metadata;
@@ -14,6 +15,7 @@ pub mod runtime;
 pub mod state;
 pub mod trusted_path;
 
+pub use forecaster::{Forecast, ForecastError, Forecaster};
 pub use library::{locate_onnxruntime, LibraryError};
 pub use metadata::{AtcVariant, MetadataError, ModelMetadata, ModelSize};
 pub use options::{ActiveProvider, Provider, RuntimeOptions, StateBinding};

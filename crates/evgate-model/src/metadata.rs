@@ -27,6 +27,10 @@ pub const KEY_TRAIN_STEPS: &str = "evgate.train-steps";
 /// key existed wrote the flow at full resolution, so an absent key means 1.
 pub const KEY_FLOW_STRIDE: &str = "evgate.flow-stride";
 
+/// Optional: the mask logit above which a pixel is an independently moving object, chosen on
+/// validation data for the best per-event F1. Exports without the key use 0 (probability 0.5).
+pub const KEY_THRESHOLD_LOGIT: &str = "evgate.threshold-logit";
+
 /// Flow strides an export may declare: powers of two that divide every padded input side.
 pub const FLOW_STRIDES: [u16; 5] = [1, 2, 4, 8, 16];
 
@@ -112,6 +116,8 @@ pub struct ModelMetadata {
     pub train_steps: u64,
     /// `future_flow` is `input / flow_stride` high and wide (1 for exports without the key).
     pub flow_stride: u16,
+    /// Logit above which a mask pixel is set (0 for exports without the key).
+    pub threshold_logit: f32,
 }
 
 impl ModelMetadata {
@@ -132,6 +138,8 @@ impl ModelMetadata {
             train_steps: parse_count(KEY_TRAIN_STEPS, &value(KEY_TRAIN_STEPS)?)?,
             flow_stride: lookup(KEY_FLOW_STRIDE)
                 .map_or(Ok(1), |stride| parse_flow_stride(&stride))?,
+            threshold_logit: lookup(KEY_THRESHOLD_LOGIT)
+                .map_or(Ok(0.0), |threshold| parse_threshold_logit(&threshold))?,
         };
         Ok(metadata)
     }
@@ -254,6 +262,13 @@ fn parse_flow_stride(value: &str) -> Result<u16, MetadataError> {
     }
 }
 
+fn parse_threshold_logit(value: &str) -> Result<f32, MetadataError> {
+    match value.trim().parse::<f32>() {
+        Ok(threshold) if threshold.is_finite() => Ok(threshold),
+        _ => Err(invalid(KEY_THRESHOLD_LOGIT, value, "a finite number")),
+    }
+}
+
 /// Written instead of a manifest hash for freshly initialised weights.
 pub const UNTRAINED_MANIFEST: &str = "untrained";
 
@@ -321,6 +336,19 @@ mod tests {
         let metadata = parse(&map).unwrap();
         assert_eq!(metadata.flow_stride, 8);
         assert_eq!(metadata.flow_size(), (34, 44));
+    }
+
+    #[test]
+    fn the_threshold_logit_defaults_to_zero_and_must_be_finite() {
+        let mut map = valid();
+        assert_eq!(parse(&map).unwrap().threshold_logit, 0.0);
+        map.insert(KEY_THRESHOLD_LOGIT, "-0.75".to_owned());
+        assert_eq!(parse(&map).unwrap().threshold_logit, -0.75);
+        map.insert(KEY_THRESHOLD_LOGIT, "nan".to_owned());
+        assert_eq!(
+            parse(&map).unwrap_err().to_string(),
+            "metadata key `evgate.threshold-logit` has value \"nan\"; expected a finite number"
+        );
     }
 
     #[test]

@@ -51,6 +51,29 @@ pub struct SceneParams {
     /// surface drawing one at random (`crate::photo`); empty: procedural textures only.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub photographs: Vec<PathBuf>,
+    /// Silhouettes, turning paths and occluders (`crate::variation`); none in the presets.
+    #[serde(default, skip_serializing_if = "ObjectVariation::is_none")]
+    pub variation: ObjectVariation,
+}
+
+/// How far the moving objects depart from the presets' boxes and discs on drifting paths.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", default, deny_unknown_fields)]
+pub struct ObjectVariation {
+    /// Share of the objects off the road cut to a silhouette (non-convex outline, thin parts,
+    /// holes) of the same size instead of their box or disc.
+    pub cutout_share: f32,
+    /// Each path off the road turns at a rate drawn within ± this (rad per second of travel).
+    pub turn_rate_rad_s: f32,
+    /// Chance that one more object crosses in front of the filmed object, hiding it for a
+    /// moment, off the road.
+    pub occluder_chance: f32,
+}
+
+impl ObjectVariation {
+    pub fn is_none(&self) -> bool {
+        *self == ObjectVariation::default()
+    }
 }
 
 /// Everything that determines a simulation besides the seed.

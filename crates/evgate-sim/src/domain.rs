@@ -1,11 +1,13 @@
-//! Domain randomisation of suite version 5: each sequence draws its textures and its sensor
-//! from ranges, so a network cannot learn the look of one simulator setting instead of motion.
+//! Domain randomisation of suite version 5: each sequence draws its textures, its sensor, its
+//! objects' silhouettes and paths (`crate::variation`) and the speed of its motion from ranges,
+//! so a network cannot learn the look of one simulator setting instead of motion.
 //!
 //! The training, validation and test splits draw from the same in-domain ranges with procedural
 //! textures only. The out-of-domain test split puts photographs on every surface and draws the
 //! sensor outside the training ranges (thresholds, their spread, refractory period, noise, hot
-//! pixels), so its score measures generalisation. The draws use their own generator, seeded from
-//! the sequence seed, so the scene built from the same seed is the preset's.
+//! pixels, timestamp jitter), so its score measures generalisation. The draws use their own
+//! generator, seeded from the sequence seed, so the layout built from the same seed is the
+//! preset's.
 
 use std::ops::Range;
 use std::path::PathBuf;
@@ -14,7 +16,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::config::SimConfig;
+use crate::config::{ObjectVariation, SceneParams, SimConfig};
 use crate::event_model::EventModel;
 use crate::preset::Preset;
 use crate::texture::TextureStyle;
@@ -42,6 +44,16 @@ pub mod ranges {
     pub const SHOT_NOISE_HZ: Range<f32> = 0.05..2.0;
     pub const LEAK_NOISE_HZ: Range<f32> = 0.01..0.5;
     pub const HOT_PIXEL_FRACTION: Range<f32> = 0.0..5e-4;
+    pub const TIMESTAMP_JITTER_US: Range<f32> = 0.0..60.0;
+}
+
+/// Factor on the preset's camera and object speeds, drawn log-uniformly in every split: with
+/// the sensor draws it spreads the events per 50 ms window over three decades (a third of the
+/// speed of the slowest presets to four times that of the fastest).
+const MOTION_SCALE: Range<f32> = 0.5..4.0;
+
+fn log_uniform(rng: &mut impl Rng, range: Range<f32>) -> f32 {
+    rng.gen_range(range.start.ln()..range.end.ln()).exp()
 }
 
 /// A value from `low` or `high`, each half the time: the out-of-domain draws lie on both
@@ -101,6 +113,22 @@ fn in_domain_sensor(rng: &mut impl Rng, base: &EventModel) -> EventModel {
     }
 }
 
+/// Silhouettes on a share of the objects, turning paths, and an occluder in half the
+/// sequences (all splits: shapes and paths are not appearance).
+fn object_variation(rng: &mut impl Rng) -> ObjectVariation {
+    ObjectVariation {
+        cutout_share: rng.gen_range(0.0..0.6),
+        turn_rate_rad_s: rng.gen_range(0.0..1.2),
+        occluder_chance: 0.5,
+    }
+}
+
+fn scale_motion(scene: &mut SceneParams, factor: f32) {
+    scene.ego_rotation_rad_s *= factor;
+    scene.ego_translation_mps *= factor;
+    scene.object_speed_mps *= factor;
+}
+
 fn out_of_domain_sensor(rng: &mut impl Rng, base: &EventModel) -> EventModel {
     EventModel {
         threshold_on: either(rng, 0.09..0.115, 0.38..0.55),
@@ -129,12 +157,16 @@ pub fn randomised_config(preset: Preset, seed: u64, domain: &Domain) -> SimConfi
             config.scene.world_texture = texture_style(&mut rng, false);
             config.scene.object_texture = texture_style(&mut rng, true);
             config.events = in_domain_sensor(&mut rng, &config.events);
+            config.events.timestamp_jitter_us = rng.gen_range(ranges::TIMESTAMP_JITTER_US);
         }
         Domain::OutOfDomain { photographs } => {
             config.scene.photographs = photographs.clone();
             config.events = out_of_domain_sensor(&mut rng, &config.events);
+            config.events.timestamp_jitter_us = rng.gen_range(90.0..300.0);
         }
     }
+    config.scene.variation = object_variation(&mut rng);
+    scale_motion(&mut config.scene, log_uniform(&mut rng, MOTION_SCALE));
     config
 }
 
@@ -148,6 +180,13 @@ mod tests {
         assert_eq!(a, randomised_config(Preset::Boxes, 7, &Domain::InDomain));
         assert_ne!(a, randomised_config(Preset::Boxes, 8, &Domain::InDomain));
         assert_eq!(a.scene.layout, Preset::Boxes.config().scene.layout);
+        let preset = Preset::Boxes.config().scene;
+        let factor = a.scene.object_speed_mps / preset.object_speed_mps;
+        assert!(
+            (MOTION_SCALE.start..=MOTION_SCALE.end).contains(&factor),
+            "{factor}"
+        );
+        assert!((a.scene.ego_rotation_rad_s / preset.ego_rotation_rad_s - factor).abs() < 1e-5);
         assert!(a.events.invalid_field().is_none());
     }
 
@@ -167,6 +206,7 @@ mod tests {
             assert!(!ranges::SHOT_NOISE_HZ.contains(&events.shot_noise_hz));
             assert!(!ranges::LEAK_NOISE_HZ.contains(&events.leak_noise_hz));
             assert!(events.hot_pixel_fraction >= ranges::HOT_PIXEL_FRACTION.end);
+            assert!(!ranges::TIMESTAMP_JITTER_US.contains(&events.timestamp_jitter_us));
             assert_eq!(config.scene.photographs, vec![PathBuf::from("photo.png")]);
         }
     }
@@ -179,6 +219,8 @@ mod tests {
             let events = config.events;
             assert!(ranges::THRESHOLD.contains(&events.threshold_on));
             assert!(ranges::REFRACTORY_US.contains(&events.refractory_us));
+            assert!(ranges::TIMESTAMP_JITTER_US.contains(&events.timestamp_jitter_us));
+            assert!(config.scene.variation.cutout_share > 0.0);
             assert!(config.scene.photographs.is_empty());
             for style in [config.scene.world_texture, config.scene.object_texture] {
                 families_seen[0] |= style.spectral > 0.0;

@@ -39,6 +39,14 @@ pub struct EventModel {
     pub max_step_us: i64,
     /// Shortest time between two renders (µs), bounding the cost of extreme motion.
     pub min_step_us: i64,
+    /// Mean readout delay of an event after its threshold crossing (µs, exponentially
+    /// distributed): the timestamp jitter of an arbitrated readout; 0 stamps the crossing.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub timestamp_jitter_us: f32,
+}
+
+fn is_zero(value: &f32) -> bool {
+    *value == 0.0
 }
 
 impl Default for EventModel {
@@ -56,6 +64,7 @@ impl Default for EventModel {
             max_step_px: 1.0,
             max_step_us: 5_000,
             min_step_us: 20,
+            timestamp_jitter_us: 0.0,
         }
     }
 }
@@ -63,7 +72,7 @@ impl Default for EventModel {
 impl EventModel {
     /// The first parameter outside its valid range, as (field, value, accepted range).
     pub fn invalid_field(&self) -> Option<(&'static str, f64, &'static str)> {
-        let checks: [(&'static str, f64, bool, &'static str); 10] = [
+        let checks: [(&'static str, f64, bool, &'static str); 11] = [
             (
                 "threshold-on",
                 self.threshold_on as f64,
@@ -123,6 +132,12 @@ impl EventModel {
                 self.min_step_us as f64,
                 self.min_step_us >= 1 && self.min_step_us <= self.max_step_us,
                 "1..=max-step-us",
+            ),
+            (
+                "timestamp-jitter-us",
+                self.timestamp_jitter_us as f64,
+                (0.0..=10_000.0).contains(&self.timestamp_jitter_us),
+                "0..=10000",
             ),
         ];
         checks

@@ -140,6 +140,14 @@ pub struct ObjectPath {
     pub spin_axis: Vec3Def,
     pub spin_rate: f32,
     pub spin_wobble: Wobble,
+    /// The drift turns about the vertical at this rate (rad per second of travel): a curve of
+    /// constant curvature that the object's history predicts; 0 drifts straight.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub turn_rate: f32,
+}
+
+fn is_zero(value: &f32) -> bool {
+    *value == 0.0
 }
 
 impl ObjectPath {
@@ -155,9 +163,8 @@ impl ObjectPath {
         let start = Vec3::from(self.start);
         let velocity = Vec3::from(self.velocity);
         let (lower, upper) = (Vec3::from(self.lower), Vec3::from(self.upper));
-        let free = |axis: usize| {
-            start.axis(axis) + velocity.axis(axis) * travelled + self.wobble[axis].value(t)
-        };
+        let drift = self.drift(velocity, travelled);
+        let free = |axis: usize| start.axis(axis) + drift.axis(axis) + self.wobble[axis].value(t);
         let mut position = Vec3::new(
             bounce(free(0), lower.x, upper.x),
             bounce(free(1), lower.y, upper.y),
@@ -174,6 +181,26 @@ impl ObjectPath {
             rotation,
             translation: position,
         }
+    }
+}
+
+impl ObjectPath {
+    /// Displacement after `travelled` seconds at unit speed: `velocity · travelled` turned about
+    /// the vertical by `turn_rate · travelled` along the way (the integral of the turning
+    /// velocity, a circular arc in x–z).
+    fn drift(&self, velocity: Vec3, travelled: f32) -> Vec3 {
+        let w = self.turn_rate;
+        if w == 0.0 {
+            return velocity * travelled;
+        }
+        let angle = w * travelled;
+        let along = angle.sin() / w;
+        let aside = (1.0 - angle.cos()) / w;
+        Vec3::new(
+            velocity.x * along + velocity.z * aside,
+            velocity.y * travelled,
+            velocity.z * along - velocity.x * aside,
+        )
     }
 }
 
@@ -205,6 +232,47 @@ mod tests {
         assert!((bounce(1.25, 0.0, 1.0) - 0.75).abs() < 1e-6);
         assert!((bounce(-0.25, 0.0, 1.0) - 0.25).abs() < 1e-6);
         assert!((bounce(2.25, 0.0, 1.0) - 0.25).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_turning_path_keeps_its_speed_and_curves_at_the_turn_rate() {
+        let path = ObjectPath {
+            start: Vec3Def([0.0, 0.0, 2.0]),
+            velocity: Vec3Def([1.0, 0.0, 0.5]),
+            speed_modulation: (0.0, 0.0, 0.0),
+            wobble: Default::default(),
+            lower: Vec3Def([-100.0; 3]),
+            upper: Vec3Def([100.0; 3]),
+            follows_drive: false,
+            base_rotation: [0.0; 3],
+            spin_axis: Vec3Def([0.0, 1.0, 0.0]),
+            spin_rate: 0.0,
+            spin_wobble: Wobble::default(),
+            turn_rate: 0.8,
+        };
+        let at = |t: f32| path.pose(t, Vec3::default()).translation;
+        let dt = 1e-3;
+        let velocity_at = |t: f32| (at(t + dt) - at(t - dt)) * (0.5 / dt);
+        let speed = Vec3::new(1.0, 0.0, 0.5).length();
+        for t in [0.3f32, 1.0, 2.5] {
+            let (v0, v1) = (velocity_at(t), velocity_at(t + 0.1));
+            assert!(
+                (v0.length() - speed).abs() < 1e-2,
+                "speed {} at {t}",
+                v0.length()
+            );
+            let turned = (v0.x * v1.z - v0.z * v1.x).atan2(v0.x * v1.x + v0.z * v1.z);
+            assert!(
+                (turned.abs() - 0.08).abs() < 2e-3,
+                "turned {turned} in 0.1 s at {t}"
+            );
+        }
+        let straight = ObjectPath {
+            turn_rate: 0.0,
+            ..path.clone()
+        };
+        let line = straight.pose(2.0, Vec3::default()).translation;
+        assert!((line - Vec3::new(2.0, 0.0, 3.0)).length() < 1e-5);
     }
 
     #[test]

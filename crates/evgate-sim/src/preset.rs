@@ -8,7 +8,7 @@ use evgate_core::SensorSize;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Intrinsics;
-use crate::config::{Layout, SceneParams, SimConfig};
+use crate::config::{Layout, ObjectVariation, SceneParams, SimConfig};
 use crate::event_model::EventModel;
 use crate::texture::TextureStyle;
 
@@ -140,6 +140,7 @@ impl Preset {
                 world_texture: office,
                 object_texture: cardboard,
                 photographs: Vec::new(),
+                variation: ObjectVariation::default(),
             },
             Preset::Floor => SceneParams {
                 layout: Layout::Floor,
@@ -154,6 +155,7 @@ impl Preset {
                 world_texture: carpet,
                 object_texture: cardboard,
                 photographs: Vec::new(),
+                variation: ObjectVariation::default(),
             },
             Preset::Wall => SceneParams {
                 layout: Layout::Wall,
@@ -168,6 +170,7 @@ impl Preset {
                 world_texture: poster,
                 object_texture: toy,
                 photographs: Vec::new(),
+                variation: ObjectVariation::default(),
             },
             Preset::Table => SceneParams {
                 layout: Layout::Table,
@@ -182,6 +185,7 @@ impl Preset {
                 world_texture: wood,
                 object_texture: toy,
                 photographs: Vec::new(),
+                variation: ObjectVariation::default(),
             },
             Preset::Fast => SceneParams {
                 layout: Layout::Room,
@@ -196,6 +200,7 @@ impl Preset {
                 world_texture: office,
                 object_texture: toy,
                 photographs: Vec::new(),
+                variation: ObjectVariation::default(),
             },
             Preset::Tabletop => SceneParams {
                 layout: Layout::Table,
@@ -210,6 +215,7 @@ impl Preset {
                 world_texture: wood,
                 object_texture: toy,
                 photographs: Vec::new(),
+                variation: ObjectVariation::default(),
             },
             Preset::Driving => SceneParams {
                 layout: Layout::Road,
@@ -224,6 +230,7 @@ impl Preset {
                 world_texture: office,
                 object_texture: cardboard,
                 photographs: Vec::new(),
+                variation: ObjectVariation::default(),
             },
         };
         SimConfig {

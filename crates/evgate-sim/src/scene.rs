@@ -7,6 +7,7 @@ use crate::atlas::TextureAtlas;
 use crate::camera::Intrinsics;
 use crate::linalg::Vec3;
 use crate::motion::{EgoMotion, ObjectPath};
+use crate::silhouette::Silhouette;
 use crate::texture::Texture;
 
 /// A textured plane of the static world: infinite (floor, back wall) or a finite rectangle
@@ -37,6 +38,9 @@ pub enum Shape {
     Cuboid { half: Vec3 },
     /// A flat ellipse in the local x–y plane (a thrown disc, a sheet, a sign).
     Ellipse { half_x: f32, half_y: f32 },
+    /// A flat plate in the local x–y plane cut to a silhouette (non-convex outlines, thin
+    /// parts, holes).
+    Cutout(Silhouette),
 }
 
 impl Shape {
@@ -45,6 +49,10 @@ impl Shape {
         let half = match *self {
             Shape::Cuboid { half } => half,
             Shape::Ellipse { half_x, half_y } => Vec3::new(half_x, half_y, 0.0),
+            Shape::Cutout(silhouette) => {
+                let [x, y] = silhouette.reach();
+                Vec3::new(x, y, 0.0)
+            }
         };
         let mut corners = [Vec3::default(); 8];
         for (i, corner) in corners.iter_mut().enumerate() {
@@ -54,6 +62,16 @@ impl Shape {
             *corner = Vec3::new(half.x * sx, half.y * sy, half.z * sz);
         }
         corners
+    }
+
+    /// How far the object reaches below its centre along its local y axis (an object resting
+    /// on a surface stands that high above it).
+    pub fn half_height(&self) -> f32 {
+        match *self {
+            Shape::Cuboid { half } => half.y,
+            Shape::Ellipse { half_y, .. } => half_y,
+            Shape::Cutout(silhouette) => silhouette.reach()[1],
+        }
     }
 }
 

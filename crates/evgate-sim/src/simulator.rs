@@ -26,6 +26,7 @@ use crate::event_sort::EventSorter;
 use crate::noise::NoiseSource;
 use crate::photo::{load_photographs, PhotoError};
 use crate::preset::Preset;
+use crate::readout_delay::ReadoutDelay;
 use crate::render::{Frame, RowScratch, Snapshot};
 use crate::scene::Scene;
 use crate::world::{build_scene, TEXTURE_SIZE};
@@ -126,6 +127,10 @@ pub struct Simulator {
     /// step: a thread started per step cost each step its stack's page faults and a wake-up.
     helpers: Option<rayon::ThreadPool>,
     stats: SimStats,
+    /// Timestamp jitter, when the event model asks for it.
+    readout_delay: Option<ReadoutDelay>,
+    /// The crossings of an `advance` call before their readout delay.
+    crossings: Vec<LabelledEvent>,
 }
 
 impl Simulator {
@@ -199,6 +204,8 @@ impl Simulator {
             config.sensor,
             threads,
         );
+        let readout_delay = (config.events.timestamp_jitter_us > 0.0)
+            .then(|| ReadoutDelay::new(config.events.timestamp_jitter_us, seed));
         Ok(Simulator {
             config,
             seed,
@@ -219,6 +226,8 @@ impl Simulator {
             threads,
             helpers: None,
             stats: SimStats::default(),
+            readout_delay,
+            crossings: Vec::new(),
         })
     }
 
@@ -261,6 +270,22 @@ impl Simulator {
     /// Appends to `out` the events in `(time_us(), t_end_us]`, in time order. The events do not
     /// depend on how the time is split into calls.
     pub fn advance(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
+        let first = out.len();
+        if let Some(mut readout_delay) = self.readout_delay.take() {
+            let mut crossings = std::mem::take(&mut self.crossings);
+            crossings.clear();
+            self.advance_crossings(t_end_us, &mut crossings);
+            readout_delay.delay(&crossings, t_end_us, out);
+            self.crossings = crossings;
+            self.readout_delay = Some(readout_delay);
+        } else {
+            self.advance_crossings(t_end_us, out);
+        }
+        self.stats.record(&out[first..]);
+    }
+
+    /// [`Simulator::advance`] without the readout delay: events at their threshold crossings.
+    fn advance_crossings(&mut self, t_end_us: i64, out: &mut Vec<LabelledEvent>) {
         // Pending events precede those of every step still to come.
         self.deliver_pending(t_end_us, out);
         // Each step sorts the step before it, so the loop ends one step past `t_end_us`: the
@@ -293,7 +318,6 @@ impl Simulator {
             [front, &back[..due_at(back)]]
         };
         for part in due {
-            self.stats.record(part);
             out.extend_from_slice(part);
         }
         let count = due[0].len() + due[1].len();
@@ -377,26 +401,14 @@ impl Simulator {
                 }
                 out
             };
-            let (unsorted, sorter, pending, stats) = (
-                &mut self.unsorted,
-                &mut self.sorter,
-                &mut self.pending,
-                &mut self.stats,
-            );
+            let (unsorted, sorter, pending) =
+                (&mut self.unsorted, &mut self.sorter, &mut self.pending);
             let (scene, config) = (&self.scene, &self.config);
             let next_static_step_us = &mut self.next_static_step_us;
             // The previous step's sort and the next step's motion probe, which would leave the
             // helpers idle between steps, overlap their rendering of this one.
             let mut main_share = || {
-                deliver(
-                    unsorted,
-                    sorter,
-                    spare_buffers,
-                    pending,
-                    t_end_us,
-                    out,
-                    stats,
-                );
+                deliver(unsorted, sorter, spare_buffers, pending, t_end_us, out);
                 *next_static_step_us = Some(Simulator::static_step_us(scene, config, t1));
                 run_all()
             };
@@ -629,7 +641,6 @@ fn deliver(
     pending: &mut VecDeque<LabelledEvent>,
     t_end_us: i64,
     out: &mut Vec<LabelledEvent>,
-    stats: &mut SimStats,
 ) {
     let events = sorter.sort_parts(parts);
     let due = if pending.is_empty() {
@@ -637,7 +648,6 @@ fn deliver(
     } else {
         0
     };
-    stats.record(&events[..due]);
     out.extend_from_slice(&events[..due]);
     pending.extend(events[due..].iter().copied());
     let mut spare = spare_buffers.lock().unwrap_or_else(PoisonError::into_inner);

@@ -10,6 +10,7 @@ use crate::linalg::{Mat3, RigidTransform, Vec3};
 use crate::motion::{EgoMotion, ObjectPath, Vec3Def, Wobble};
 use crate::scene::{MovingObject, Panel, Scene, Shape};
 use crate::texture::{Texture, TextureStyle};
+use crate::variation::vary_objects;
 
 /// Side of every texture in texels.
 pub const TEXTURE_SIZE: usize = 256;
@@ -24,11 +25,11 @@ const FILMED_VIEW_SHARE: f32 = 0.6;
 const MAX_SWING_RAD: f32 = 0.2;
 
 /// Where moving objects may be, and whether they rest on a surface.
-struct ObjectRegion {
-    lower: Vec3,
-    upper: Vec3,
+pub(crate) struct ObjectRegion {
+    pub lower: Vec3,
+    pub upper: Vec3,
     /// y of the supporting surface (objects rest on it) or `None` when they fly.
-    ground_y: Option<f32>,
+    pub ground_y: Option<f32>,
 }
 
 /// Builds the scene of `config`; with `photographs`, every surface takes one of them at random
@@ -147,7 +148,7 @@ pub fn build_scene(config: &SimConfig, photographs: &[Texture], rng: &mut impl R
         Layout::Road => None,
         _ => filmed_region(&region, &ego, config),
     };
-    let objects = (0..object_count)
+    let mut objects: Vec<MovingObject> = (0..object_count)
         .map(|k| {
             let texture = new_texture(&params.object_texture, rng);
             let object_region = match &filmed {
@@ -157,6 +158,8 @@ pub fn build_scene(config: &SimConfig, photographs: &[Texture], rng: &mut impl R
             random_object(params, object_region, texture, rng)
         })
         .collect();
+    let light = Vec3::new(rng.gen_range(-0.5..0.5), -1.0, rng.gen_range(-0.8..-0.2)).normalized();
+    vary_objects(params, &region, &ego, &mut objects, &mut new_texture, rng);
     Scene {
         sensor: config.sensor,
         intrinsics: config.intrinsics,
@@ -165,7 +168,7 @@ pub fn build_scene(config: &SimConfig, photographs: &[Texture], rng: &mut impl R
         objects,
         atlas: TextureAtlas::new(&textures),
         textures,
-        light: Vec3::new(rng.gen_range(-0.5..0.5), -1.0, rng.gen_range(-0.8..-0.2)).normalized(),
+        light,
         ambient: 0.45,
     }
 }
@@ -291,7 +294,7 @@ fn hand_held(params: &SceneParams, pitch: f32, rng: &mut impl Rng) -> EgoMotion 
     }
 }
 
-type NewTexture<'a> = dyn FnMut(&TextureStyle, &mut dyn rand::RngCore) -> usize + 'a;
+pub(crate) type NewTexture<'a> = dyn FnMut(&TextureStyle, &mut dyn rand::RngCore) -> usize + 'a;
 
 /// Floor, ceiling, back wall and side walls of a room around the camera at the origin.
 fn add_room(
@@ -455,6 +458,33 @@ fn add_street(
     }
 }
 
+/// A box whose longest side is `size`.
+pub(crate) fn random_box(size: f32, rng: &mut impl Rng) -> Shape {
+    let half = size / 2.0;
+    Shape::Cuboid {
+        half: Vec3::new(
+            half,
+            half * rng.gen_range(0.5..1.0),
+            half * rng.gen_range(0.5..1.0),
+        ),
+    }
+}
+
+/// A random axis for a flying object to tumble about; objects on a surface turn about the
+/// vertical.
+pub(crate) fn random_spin_axis(flying: bool, rng: &mut impl Rng) -> Vec3 {
+    if flying {
+        Vec3::new(
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+        )
+        .normalized()
+    } else {
+        Vec3::new(0.0, 1.0, 0.0)
+    }
+}
+
 fn random_object(
     params: &SceneParams,
     region: &ObjectRegion,
@@ -481,19 +511,9 @@ fn random_object(
             half_y: size / 2.0 * rng.gen_range(0.5..1.0),
         }
     } else {
-        let half = size / 2.0;
-        Shape::Cuboid {
-            half: Vec3::new(
-                half,
-                half * rng.gen_range(0.5..1.0),
-                half * rng.gen_range(0.5..1.0),
-            ),
-        }
+        random_box(size, rng)
     };
-    let half_height = match shape {
-        Shape::Cuboid { half } => half.y,
-        Shape::Ellipse { half_y, .. } => half_y,
-    };
+    let half_height = shape.half_height();
     let (mut lower, mut upper) = (region.lower, region.upper);
     if let Some(ground) = region.ground_y {
         lower.y = ground - half_height;
@@ -529,16 +549,7 @@ fn random_object(
             rng,
         ),
     ];
-    let spin_axis = if flying {
-        Vec3::new(
-            rng.gen_range(-1.0..1.0),
-            rng.gen_range(-1.0..1.0),
-            rng.gen_range(-1.0..1.0),
-        )
-        .normalized()
-    } else {
-        Vec3::new(0.0, 1.0, 0.0)
-    };
+    let spin_axis = random_spin_axis(flying, rng);
     let spin_rate = if driving {
         0.0
     } else {
@@ -572,6 +583,7 @@ fn random_object(
             spin_axis: spin_axis.into(),
             spin_rate,
             spin_wobble: Wobble::random(1, 0.5, 0.2, 1.0, rng),
+            turn_rate: 0.0,
         },
         texture,
         texel_m: size / 128.0,

@@ -1,13 +1,17 @@
-"""Flips and polarity inversion, applied alike to the voxel grid, masks, flow and events.
+"""Flips and polarity inversion, applied alike to the voxel grid, targets and events.
 
-One draw per training chunk: the recurrence must see one consistent world across windows.
+One draw per stream: the recurrence must see one consistent world across windows.
 """
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from .windows import FutureEvents, TrainingWindow
+
+# [..., H, W] fields of a TrainingWindow that flip with the image.
+SPATIAL_FIELDS = ("voxel", "mask", "future_mask", "footprint", "future_flow", "flow_valid", "object_region")
 
 
 @dataclass(frozen=True)
@@ -20,33 +24,37 @@ class Augmentation:
     def draw(rng: np.random.Generator) -> "Augmentation":
         return Augmentation(bool(rng.random() < 0.5), bool(rng.random() < 0.5), bool(rng.random() < 0.5))
 
+    @staticmethod
+    def none() -> "Augmentation":
+        return Augmentation(False, False, False)
 
-def apply(window: TrainingWindow, augmentation: Augmentation, size: int) -> TrainingWindow:
-    voxel, mask, future_mask = window.voxel, window.mask, window.future_mask
-    flow, flow_valid = window.future_flow.copy(), window.flow_valid
+
+def augmented_voxel(voxel: np.ndarray, augmentation: Augmentation) -> np.ndarray:
+    """The voxel grid [2, H, W] as `apply` augments it (rebuilding a stream's recurrent state)."""
+    if augmentation.flip_horizontal:
+        voxel = voxel[..., ::-1]
+    if augmentation.flip_vertical:
+        voxel = voxel[..., ::-1, :]
+    return np.ascontiguousarray(-voxel if augmentation.invert_polarity else voxel)
+
+
+def apply(window: TrainingWindow, augmentation: Augmentation) -> TrainingWindow:
+    fields = {name: getattr(window, name) for name in SPATIAL_FIELDS}
+    height, width = window.mask.shape
     events = list(window.future_events)
     if augmentation.flip_horizontal:
-        voxel, mask, future_mask = voxel[..., ::-1], mask[..., ::-1], future_mask[..., ::-1]
-        flow, flow_valid = flow[..., ::-1], flow_valid[..., ::-1]
-        flow[:, 0] = -flow[:, 0]
-        events = [FutureEvents(size - 1 - e.x, e.y, e.t_ms, e.on) for e in events]
+        fields = {name: value[..., ::-1] for name, value in fields.items()}
+        fields["future_flow"] = fields["future_flow"] * np.array([-1, 1], np.float32)[:, None, None]
+        events = [FutureEvents(width - 1 - e.x, e.y, e.t_ms, e.on) for e in events]
     if augmentation.flip_vertical:
-        voxel, mask, future_mask = voxel[..., ::-1, :], mask[..., ::-1, :], future_mask[..., ::-1, :]
-        flow, flow_valid = flow[..., ::-1, :], flow_valid[..., ::-1, :]
-        flow[:, 1] = -flow[:, 1]
-        events = [FutureEvents(e.x, size - 1 - e.y, e.t_ms, e.on) for e in events]
+        fields = {name: value[..., ::-1, :] for name, value in fields.items()}
+        fields["future_flow"] = fields["future_flow"] * np.array([1, -1], np.float32)[:, None, None]
+        events = [FutureEvents(e.x, height - 1 - e.y, e.t_ms, e.on) for e in events]
     if augmentation.invert_polarity:
         # Negating every event's sign negates the raw grid, its non-zero mean, and so the
         # standardised grid: the voxel of the inverted stream is exactly -voxel.
-        voxel = -voxel
+        fields["voxel"] = -fields["voxel"]
         events = [FutureEvents(e.x, e.y, e.t_ms, ~e.on) for e in events]
-    return TrainingWindow(
-        voxel=np.ascontiguousarray(voxel),
-        mask=np.ascontiguousarray(mask),
-        mask_valid=window.mask_valid,
-        horizons_ms=window.horizons_ms,
-        future_mask=np.ascontiguousarray(future_mask),
-        future_flow=np.ascontiguousarray(flow),
-        flow_valid=np.ascontiguousarray(flow_valid),
-        future_events=events,
+    return dataclasses.replace(
+        window, **{name: np.ascontiguousarray(value) for name, value in fields.items()}, future_events=events
     )

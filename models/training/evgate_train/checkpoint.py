@@ -1,4 +1,5 @@
-"""Training checkpoints: weights, optimiser, step, configuration and data manifest hash."""
+"""Training checkpoints: weights, optimiser, step, configuration, data manifest hash and the
+run's continuation (data cursor, random states, the recurrent states being carried)."""
 
 import dataclasses
 from dataclasses import dataclass
@@ -22,9 +23,19 @@ class Checkpoint:
     manifest_sha256: str
     optimiser_state: dict | None
     train_config: dict
+    # What a resumed run needs to continue the same stream: `train.continuation`.
+    continuation: dict | None
 
 
-def save_checkpoint(path: Path, network: SuppressionNetwork, optimiser, step: int, manifest_sha256: str, train_config: dict) -> None:
+def save_checkpoint(
+    path: Path,
+    network: SuppressionNetwork,
+    optimiser,
+    step: int,
+    manifest_sha256: str,
+    train_config: dict,
+    continuation: dict | None = None,
+) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_suffix(".tmp")
     torch.save(
@@ -35,6 +46,7 @@ def save_checkpoint(path: Path, network: SuppressionNetwork, optimiser, step: in
             "step": step,
             "manifest_sha256": manifest_sha256,
             "train_config": train_config,
+            "continuation": continuation,
         },
         temporary,
     )
@@ -58,6 +70,7 @@ def load_checkpoint(path: Path) -> Checkpoint:
         manifest_sha256=payload["manifest_sha256"],
         optimiser_state=payload.get("optimiser"),
         train_config=payload.get("train_config", {}),
+        continuation=payload.get("continuation"),
     )
 
 

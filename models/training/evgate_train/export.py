@@ -9,6 +9,7 @@ network.WARP_RESOLUTIONS): the same weights, a quarter of the sampling work per 
 
 import argparse
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -62,6 +63,7 @@ def export(
     manifest_sha256: str,
     train_steps: int,
     warp_resolution: str = "half",
+    threshold_logit: float = 0.0,
 ) -> None:
     check_input_size(height, width)
     # The wrapper must be in eval mode too: the exporter restores the wrapper's mode afterwards,
@@ -99,6 +101,7 @@ def export(
         "evgate.train-steps": str(train_steps),
         "evgate.warp-resolution": warp_resolution,
         "evgate.flow-stride": str(network.flow_stride),
+        "evgate.threshold-logit": repr(float(threshold_logit)),
     }
     del model.metadata_props[:]
     for key, value in metadata.items():
@@ -133,7 +136,16 @@ def main(argv: list[str] | None = None) -> int:
         help="resolution the future mask logits are warped at: half (the mask decoder's, cheaper on CPU) or "
         "full (the training path, as exports before the half-resolution path)",
     )
+    parser.add_argument(
+        "--threshold-logit",
+        type=float,
+        default=0.0,
+        help="mask threshold written as evgate.threshold-logit, which evgate-infer and evgate eval apply "
+        "(choose it on val with evgate_train.calibrate)",
+    )
     args = parser.parse_args(argv)
+    if not math.isfinite(args.threshold_logit):
+        parser.error(f"--threshold-logit {args.threshold_logit}: expected a finite number")
     if args.train_steps is not None and args.train_steps < 0:
         parser.error(f"--train-steps {args.train_steps}: expected a non-negative number of steps")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
@@ -146,7 +158,9 @@ def main(argv: list[str] | None = None) -> int:
         torch.manual_seed(0)
         network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
         manifest, steps = "untrained", 0
-    export(network, args.output, args.height, args.width, manifest, steps, args.warp_resolution)
+    export(
+        network, args.output, args.height, args.width, manifest, steps, args.warp_resolution, args.threshold_logit
+    )
     log.info(
         "wrote %s (%s, %dx%d, %d steps, warp at %s resolution)",
         args.output, network.config.size, args.width, args.height, steps, args.warp_resolution,

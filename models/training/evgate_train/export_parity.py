@@ -3,7 +3,7 @@ Runtime, with the recurrent state carried (the parity test does the same on a ti
 
     python -m evgate_train.export_parity --checkpoint runs/S2-c160/checkpoint-step2500.pt \\
         --data ../../data/suite-v4/val --export previous=/tmp/evgate-S-before.onnx --export new=../evgate-S.onnx \\
-        --output ../reports/latency/export-rewrite/S-parity-val-v4.json
+        --output ../../evidence/models/latency/export-rewrite/S-parity-val-v4.json
 
 Per export and output: the largest absolute difference and the largest ratio to the parity
 tolerance (1e-4 + 1e-4 |PyTorch|); for the future mask logits also how many values exceed

@@ -1,4 +1,4 @@
-"""Supervised losses: BCE (+ Dice) on mask logits, L1 on flow, Charbonnier smoothness."""
+"""Supervised losses: BCE (+ Dice) on mask logits, L1 on flow by region, Charbonnier smoothness."""
 
 import torch
 import torch.nn.functional as F
@@ -25,17 +25,29 @@ def bce_dice(
     return loss
 
 
-def flow_l1(flow: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """Mean end-point L1 over valid pixels; flow/target [N, 2, H, W], valid [N, H, W]."""
-    valid = valid.to(flow.dtype)
+def flow_l1_by_region(flow: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, region: torch.Tensor) -> torch.Tensor:
+    """Mean end-point L1 over the valid pixels of `region` plus that over the valid pixels
+    outside it; flow/target [N, 2, H, W], valid/region [N, H, W] bool. Objects cover a few per
+    cent of a frame: one mean over all pixels would leave their motion untaught."""
     error = (flow - target).abs().sum(1)
-    return (error * valid).sum() / valid.sum().clamp_min(1.0)
+    total = flow.new_zeros(())
+    for part in (valid & region, valid & ~region):
+        weight = part.to(flow.dtype)
+        total = total + (error * weight).sum() / weight.sum().clamp_min(1.0)
+    return total
 
 
-def charbonnier_smoothness(flow: torch.Tensor) -> torch.Tensor:
-    """Charbonnier penalty on the first-order spatial differences of flow [N, 2, H, W]."""
+def charbonnier_smoothness(flow: torch.Tensor, *labels: torch.Tensor) -> torch.Tensor:
+    """Charbonnier penalty on the first-order spatial differences of flow [N, 2, H, W], left out
+    between neighbours whose value differs in any of `labels` ([N, H, W] bool): motion is
+    discontinuous at object edges."""
     dx = flow[..., :, 1:] - flow[..., :, :-1]
     dy = flow[..., 1:, :] - flow[..., :-1, :]
-    penalty_x = torch.sqrt((dx**2).sum(1) + CHARBONNIER_EPSILON**2)
-    penalty_y = torch.sqrt((dy**2).sum(1) + CHARBONNIER_EPSILON**2)
-    return penalty_x.mean() + penalty_y.mean()
+    keep_x = torch.ones_like(dx[:, 0], dtype=torch.bool)
+    keep_y = torch.ones_like(dy[:, 0], dtype=torch.bool)
+    for label in labels:
+        keep_x &= label[..., :, 1:] == label[..., :, :-1]
+        keep_y &= label[..., 1:, :] == label[..., :-1, :]
+    penalty_x = torch.sqrt((dx**2).sum(1) + CHARBONNIER_EPSILON**2) * keep_x
+    penalty_y = torch.sqrt((dy**2).sum(1) + CHARBONNIER_EPSILON**2) * keep_y
+    return penalty_x.sum() / keep_x.sum().clamp_min(1) + penalty_y.sum() / keep_y.sum().clamp_min(1)

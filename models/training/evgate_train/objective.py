@@ -8,7 +8,7 @@ import torch
 
 from .batches import WindowBatch
 from .contrast_maximisation import batched_average_timestamp_loss
-from .losses import bce_dice, charbonnier_smoothness, flow_l1
+from .losses import bce_dice, charbonnier_smoothness, flow_l1_by_region
 from .network import NetworkOutput
 from .warp import backward_warp
 
@@ -26,7 +26,9 @@ class LossWeights:
     positive: float = 1.0
     flow: float = 0.1
     smoothness: float = 0.05
-    contrast: float = 1.0
+    # Off by default: in every logged run the term stayed flat (about 0.116) at about 28 % of
+    # the step time.
+    contrast: float = 0.0
     # The true mask at t warped by the predicted flow against the true mask at t + h: a flow
     # signal that does not depend on how good the predicted current mask is.
     true_mask_warp: float = 0.0
@@ -41,20 +43,23 @@ def window_objective(
     """`with_contrast=False` skips the contrast-maximisation term (`contrast_term`)."""
     valid = batch.mask_valid.view(-1, 1, 1, 1).expand_as(batch.mask)
     current = bce_dice(out.mask_logits, batch.mask, valid, weights.dice, weights.positive)
-    future = bce_dice(
-        out.future_mask_logits,
-        batch.future_mask,
-        torch.ones_like(batch.future_mask, dtype=torch.bool),
-        weights.dice,
-        weights.positive,
-    )
+    future_valid = batch.future_valid[..., None, None].expand_as(batch.future_mask)
+    future = bce_dice(out.future_mask_logits, batch.future_mask, future_valid, weights.dice, weights.positive)
     flow = out.future_flow.flatten(0, 1)
-    flow_error = flow_l1(flow, batch.future_flow.flatten(0, 1), batch.flow_valid.flatten(0, 1))
-    smoothness = charbonnier_smoothness(flow)
+    flow_valid = (batch.flow_valid & future_valid).flatten(0, 1)
+    region = batch.object_region.flatten(0, 1)
+    flow_error = flow_l1_by_region(flow, batch.future_flow.flatten(0, 1), flow_valid, region)
+    smoothness = (
+        charbonnier_smoothness(flow, batch.footprint.flatten(0, 1), region)
+        if weights.smoothness > 0
+        else flow.new_zeros(())
+    )
     true_mask_warp = (
         true_mask_warp_term(flow, batch, weights) if weights.true_mask_warp > 0 else flow.new_zeros(())
     )
-    contrast = contrast_term(out.velocity, batch, weights) if with_contrast else flow.new_zeros(())
+    contrast = (
+        contrast_term(out.velocity, batch, weights) if with_contrast and weights.contrast > 0 else flow.new_zeros(())
+    )
     total = (
         current
         + weights.future_mask * future
@@ -87,7 +92,7 @@ def true_mask_warp_term(flow: torch.Tensor, batch: WindowBatch, weights: LossWei
     per_horizon = batch.mask.unsqueeze(1).expand(-1, horizons, -1, -1, -1).flatten(0, 1)
     warped = backward_warp(per_horizon, flow).view_as(batch.future_mask)
     warped = torch.logit(TRUE_MASK_MARGIN + (1.0 - 2.0 * TRUE_MASK_MARGIN) * warped)
-    valid = batch.mask_valid.view(-1, 1, 1, 1).expand_as(batch.future_mask)
+    valid = (batch.mask_valid.view(-1, 1) & batch.future_valid)[..., None, None].expand_as(batch.future_mask)
     return bce_dice(warped, batch.future_mask, valid, weights.dice, weights.positive)
 
 

@@ -92,4 +92,5 @@ def load_export(path: Path, threads: int) -> Checkpoint:
         manifest_sha256=network.metadata.get("evgate.train-manifest-sha256", ""),
         optimiser_state=None,
         train_config={},
+        continuation=None,
     )

@@ -1,7 +1,7 @@
 """Where the time of an exported model goes: ONNX Runtime's own profiler, per operator.
 
     python -m evgate_train.profile_operators --model ../evgate-S.onnx --threads 2 --horizons 8,1 \
-        --output ../reports/latency/profile-S.json
+        --output ../../evidence/models/latency/profile-S.json
 
 Runs the model as a stream does (zero states, then the returned states fed back) with the
 session options of the Rust runtime (graph optimisation level all, memory pattern off, one

@@ -47,6 +47,8 @@ class Sequence:
     future_mask: np.ndarray  # uint8 object ids [R, K, H, W]
     future_flow: np.ndarray  # float16 [R, K, H, W, 2] (dx, dy) pixels
     meta: dict
+    # Object id of each event (0 = background), where the file has them.
+    events_label: np.ndarray | None = None
 
     @property
     def preset(self) -> str:
@@ -85,6 +87,7 @@ def load_sequence(path: Path) -> Sequence:
         raise SequenceFormatError(f"{path}: not a readable .npz: {error}") from error
     with archive:
         arrays = {key: _check(path, archive, key) for key in REQUIRED_ARRAYS}
+        labels = archive["events_label"] if "events_label" in archive else None
     width, height = (int(v) for v in arrays["resolution"])
     events_t, events_xy = arrays["events_t"], arrays["events_xy"]
     count = len(events_t)
@@ -135,4 +138,5 @@ def load_sequence(path: Path) -> Sequence:
         future_mask=arrays["future_mask"],
         future_flow=arrays["future_flow"],
         meta=meta if isinstance(meta, dict) else {"value": meta},
+        events_label=labels if labels is not None and len(labels) == count else None,
     )

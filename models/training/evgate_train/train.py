@@ -1,11 +1,16 @@
 """Trains the suppression network on simulated sequences (docs/sequence-format.md).
 
-    python -m evgate_train.train --data ../../data/suite/train --manifest ../../data/suite/manifest.json \
-        --run-dir runs/S --size S --steps 1500
+    python -m evgate_train.train --data ../../data/suite-v5-full/train \
+        --manifest ../../data/suite-v5-full/manifest.json --run-dir runs/S --size S --steps 20000
 
-Chunks of consecutive 50 ms windows carry the recurrent state; horizons come from the
-sequences' uniformly sampled ones in [0, 100] ms. Writes runs/<name>/checkpoint.pt (resumable
-with --resume), log.jsonl (one line of losses per step) and config.json.
+Stateful: each of --streams batch slots plays one sequence from its start to its end
+(`streams.StreamSampler`), --windows-per-step windows per optimiser step, and the recurrent
+state is carried from step to step, detached after each (truncated back-propagation through
+time); it is zero only where a stream starts. Targets come from the 10 ms ground-truth grid at
+--horizons horizons per window, always including the scored 100 ms. Writes
+runs/<name>/checkpoint.pt (resumable with --resume: weights, optimiser, step, random states and
+the data cursor), log.jsonl (one line of losses per step), val.jsonl (with --val-data) and
+config.json.
 """
 
 import argparse
@@ -24,13 +29,14 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from .batches import ChunkSampler
 from .checkpoint import load_checkpoint, save_checkpoint, with_time_conditioning
-from .loader import chunk_batches
+from .evaluate import aggregate, evaluate_sequence
 from .network import NetworkConfig, SuppressionNetwork, check_input_size
 from .objective import LossWeights, window_objective
 from .sequence import load_sequence
+from .streams import StreamSampler, StreamStep, preset_of
 from .time_conditioning import VARIANTS
+from .windows import SCORED_HORIZON_MS
 
 log = logging.getLogger("evgate_train.train")
 
@@ -40,18 +46,42 @@ class TrainingSetupError(ValueError):
 
 
 def manifest_digest(path: Path) -> str:
+    """SHA-256 of the manifest's content without its measured wall times (`wall-s`, at any
+    depth): the same split regenerated on another machine, bit for bit from its seeds, digests
+    the same, so a campaign resumes there."""
     try:
-        return hashlib.sha256(path.read_bytes()).hexdigest()
-    except OSError as error:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
         raise TrainingSetupError(f"{path}: cannot read the training manifest: {error}") from error
 
+    def without_wall_times(value):
+        if isinstance(value, dict):
+            return {key: without_wall_times(item) for key, item in value.items() if key != "wall-s"}
+        if isinstance(value, list):
+            return [without_wall_times(item) for item in value]
+        return value
 
-def learning_rate(step: int, total: int, peak: float, warmup: int, elapsed_share: float = 0.0) -> float:
-    """Linear warm-up, then cosine decay to a tenth of the peak; under a time budget the decay
-    follows whichever is further along, the steps or the budget's `elapsed_share`."""
+    canonical = json.dumps(without_wall_times(manifest), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def drop_records_after(path: Path, step: int) -> None:
+    """Removes the records of steps past `step` from a JSON-lines log: a run that stopped between
+    two checkpoints logged steps that the resumed run computes again."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    kept = [line for line in lines if json.loads(line)["step"] <= step]
+    if len(kept) < len(lines):
+        path.write_text("".join(kept))
+        log.info("%s: dropped %d records past step %d", path, len(lines) - len(kept), step)
+
+
+def learning_rate(step: int, total: int, peak: float, warmup: int) -> float:
+    """Linear warm-up, then cosine decay to a tenth of the peak."""
     if step < warmup:
         return peak * (step + 1) / warmup
-    progress = min(1.0, max((step - warmup) / max(1, total - warmup), elapsed_share))
+    progress = min(1.0, (step - warmup) / max(1, total - warmup))
     return peak * (0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * progress)))
 
 
@@ -73,6 +103,16 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
+def parse_crop(text: str) -> tuple[int, int]:
+    height, separator, width = text.partition("x")
+    try:
+        size = (int(height), int(width)) if separator else (int(text), int(text))
+    except ValueError:
+        raise TrainingSetupError(f"--crop {text!r}: expected HEIGHTxWIDTH, e.g. 272x352, or one side") from None
+    check_input_size(*size)
+    return size
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, required=True, help="directory searched recursively for training .npz sequences")
@@ -83,18 +123,30 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--time-conditioning", default="position-aware", help="ATC variant: position-aware, reference or none"
     )
-    parser.add_argument("--steps", type=int, default=1500, help="optimiser steps")
-    parser.add_argument("--batch", type=int, default=4, help="chunks per step")
-    parser.add_argument("--chunk-windows", type=int, default=4, help="consecutive 50 ms windows per chunk")
-    parser.add_argument("--crop", type=int, default=112, help="square crop side in pixels (multiple of 16)")
-    parser.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (AdamW)")
-    parser.add_argument("--warmup", type=int, default=50, help="warm-up steps")
+    parser.add_argument("--steps", type=int, default=20000, help="optimiser steps (the learning-rate schedule's length)")
+    parser.add_argument("--streams", type=int, default=4, help="sequences played side by side (the batch)")
+    parser.add_argument(
+        "--windows-per-step", type=int, default=4, help="consecutive 50 ms windows per step (the truncation length)"
+    )
+    parser.add_argument(
+        "--crop",
+        default="272x352",
+        help="HEIGHTxWIDTH of each stream's fixed crop of the padded frame, multiples of 16 (default: a whole "
+        "346x260 frame as evaluation pads it, so attention tokens and normalisation see what they see there)",
+    )
+    parser.add_argument(
+        "--horizons", type=int, default=3, help="forecast horizons per window: 100 ms and others of the 10 ms grid"
+    )
+    parser.add_argument("--lr", type=float, default=1e-3, help="peak learning rate (AdamW)")
+    parser.add_argument("--warmup", type=int, default=100, help="warm-up steps")
     parser.add_argument("--weight-decay", type=float, default=1e-4, help="AdamW weight decay")
-    parser.add_argument("--dice-weight", type=float, default=0.5, help="Dice term weight (0 disables Dice)")
-    parser.add_argument("--positive-weight", type=float, default=1.0, help="BCE weight of IMO pixels")
-    parser.add_argument("--flow-weight", type=float, default=0.1, help="flow L1 weight")
-    parser.add_argument("--smoothness-weight", type=float, default=0.05, help="Charbonnier smoothness weight")
-    parser.add_argument("--contrast-weight", type=float, default=1.0, help="contrast-maximisation weight")
+    parser.add_argument("--dice-weight", type=float, default=1.0, help="Dice term weight (0 disables Dice)")
+    parser.add_argument("--positive-weight", type=float, default=3.0, help="BCE weight of IMO pixels")
+    parser.add_argument("--flow-weight", type=float, default=0.1, help="flow L1 weight (object and background means)")
+    parser.add_argument(
+        "--smoothness-weight", type=float, default=0.02, help="Charbonnier smoothness weight (not across object edges)"
+    )
+    parser.add_argument("--contrast-weight", type=float, default=0.0, help="contrast-maximisation weight (0 = off)")
     parser.add_argument(
         "--true-mask-warp-weight",
         type=float,
@@ -104,26 +156,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--max-contrast-events", type=int, default=4000, help="events per future window for CM")
     parser.add_argument(
-        "--contrast-last-window-only",
-        action="store_true",
-        help="compute contrast maximisation on each chunk's last window only (about 1.1x faster steps on CPU "
-        "since the term is batched)",
-    )
-    parser.add_argument(
         "--forecast-ramp-steps",
         type=int,
         default=0,
-        help="curriculum from horizon 0: the forecast terms (future mask, flow, smoothness, contrast) "
-        "ramp linearly from 0 to their weights over these steps, so the current mask is learnt first",
+        help="curriculum: the forecast terms (future mask, flow, smoothness, contrast) ramp linearly from 0 to "
+        "their weights over these steps, so the current mask is learnt first",
     )
     parser.add_argument("--no-augment", action="store_true", help="disable flips and polarity inversion")
-    parser.add_argument(
-        "--flow-target",
-        default="forward",
-        choices=("forward", "arrival"),
-        help="flow L1 target: the simulator's forward flow (defined where a pixel leaves), or "
-        "'arrival': inside each object's future footprint its mean flow, which backward warping needs",
-    )
     parser.add_argument("--seed", type=int, default=7, help="seed of weights, sampling and augmentation")
     parser.add_argument(
         "--threads",
@@ -132,19 +171,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="torch CPU threads; on a shared 2-core machine 1 is several times faster than 2 "
         "(OpenMP workers spin on busy cores)",
     )
+    parser.add_argument("--bf16", action="store_true", help="bfloat16 autocast of the forward pass (CPU AVX-512 BF16)")
     parser.add_argument("--checkpoint-every", type=int, default=50, help="steps between checkpoints")
     parser.add_argument(
-        "--keep-checkpoints-at",
-        default="",
-        help="comma-separated steps whose checkpoints are also kept as checkpoint-step<N>.pt "
-        "(equal-step ablations against a longer run with the same schedule)",
+        "--val-data", type=Path, help="directory of validation .npz sequences, scored every --val-every steps"
+    )
+    parser.add_argument("--val-every", type=int, default=500, help="steps between validation scores")
+    parser.add_argument(
+        "--val-seconds", type=float, default=0.0, help="score only each validation sequence's leading seconds (0 = all)"
     )
     parser.add_argument(
         "--stop-at-step",
         type=int,
         default=0,
         help="end the run at this step while keeping the learning-rate schedule of --steps "
-        "(short ablations that match a longer run step for step); 0 = run all --steps",
+        "(a campaign spread over sessions, or short ablations that match a longer run); 0 = run all --steps",
     )
     parser.add_argument(
         "--device",
@@ -152,17 +193,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="torch device: cpu, or cuda (convolutions and matrix products in TF32 there)",
     )
     parser.add_argument(
-        "--loader-workers",
-        type=int,
-        default=0,
-        help="processes drawing training chunks ahead of the steps (0 = draw in the training process)",
-    )
-    parser.add_argument(
         "--time-budget-s",
         type=float,
         default=0.0,
-        help="end the run after this many seconds of training, with the learning-rate decay paced by the "
-        "elapsed share of the budget (a fixed lease on a GPU machine); 0 = no budget",
+        help="end this process after so many seconds of training (the schedule stays that of --steps); 0 = none",
     )
     parser.add_argument("--resume", action="store_true", help="continue from run-dir/checkpoint.pt")
     parser.add_argument(
@@ -180,6 +214,103 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def random_states() -> dict:
+    return {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}
+
+
+def restore_random_states(states: dict) -> None:
+    random.setstate(states["python"])
+    np.random.set_state(states["numpy"])
+    torch.set_rng_state(states["torch"])
+
+
+@torch.no_grad()
+def replayed_states(network: SuppressionNetwork, sampler: StreamSampler, device: torch.device) -> list[torch.Tensor]:
+    """The recurrent states of every stream at its cursor, rebuilt by playing its windows so far
+    through the current weights (a checkpoint stays a few MB instead of holding them)."""
+    states = network.initial_states(sampler.streams, sampler.crop_height, sampler.crop_width, device)
+    was_training = network.training
+    network.eval()
+    horizon = torch.full((1, 1), float(SCORED_HORIZON_MS), device=device)
+    for slot in range(sampler.streams):
+        slot_states = [s[slot : slot + 1] for s in states]
+        for voxel in sampler.played_voxels(slot):
+            slot_states = network(torch.from_numpy(voxel)[None].to(device), horizon, slot_states).states
+        for state, rebuilt in zip(states, slot_states):
+            state[slot : slot + 1] = rebuilt
+    network.train(was_training)
+    return states
+
+
+def carried_states(states: list[torch.Tensor], starts: np.ndarray) -> list[torch.Tensor]:
+    """The recurrent states entering a step: zero for the streams that start there, the
+    previous step's (detached: truncated back-propagation) for the others."""
+    starting = torch.from_numpy(starts).to(states[0].device).view(-1, 1, 1, 1)
+    return [torch.where(starting, torch.zeros_like(s), s.detach()) for s in states]
+
+
+def train_step(
+    network: SuppressionNetwork,
+    optimiser: torch.optim.Optimizer,
+    drawn: StreamStep,
+    states: list[torch.Tensor],
+    weights: LossWeights,
+    bf16: bool = False,
+) -> tuple[list[torch.Tensor], dict[str, torch.Tensor]]:
+    """One optimiser step over a stream step's windows, the states carried through them; returns
+    the states at its end and the window-averaged losses (with the gradient norm)."""
+    states = carried_states(states, drawn.starts)
+    device = states[0].device
+    sums: dict[str, torch.Tensor] = {}
+    for batch in drawn.windows:
+        batch = batch.to(device)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+            out = network(batch.voxel, batch.horizons_ms, states)
+        states = out.states
+        for key, value in window_objective(out, batch, weights).items():
+            sums[key] = sums.get(key, 0.0) + value.float() / len(drawn.windows)
+    optimiser.zero_grad(set_to_none=True)
+    sums["total"].backward()
+    sums["grad_norm"] = torch.nn.utils.clip_grad_norm_(network.parameters(), 1.0)
+    optimiser.step()
+    return [s.detach() for s in states], sums
+
+
+def validation_scores(network: SuppressionNetwork, sequences: list, seconds: float) -> dict:
+    """mIoU, pIoU and R@0.5 of the current mask and of the 100 ms forecast, means over the
+    EVIMO-like presets and per preset (evaluation's aggregate)."""
+    was_training = network.training
+    per_sequence = [
+        (
+            sequence.preset,
+            {
+                key: score.summary()
+                for key, score in evaluate_sequence(
+                    network, sequence, [float(SCORED_HORIZON_MS)], with_baselines=False, max_seconds=seconds
+                ).items()
+            },
+        )
+        for sequence in sequences
+    ]
+    network.train(was_training)
+    summary = aggregate(per_sequence)
+    keep = ("miou", "piou", "r50")
+
+    def rounded(value: float) -> float | None:
+        return round(value, 4) if math.isfinite(value) else None
+
+    return {
+        "evimo-like": {
+            key: {m: rounded(v) for m, v in metrics.items() if m in keep}
+            for key, metrics in summary["evimo-like-mean"].items()
+        },
+        "presets": {
+            preset: {key: {m: rounded(v) for m, v in metrics.items() if m in keep} for key, metrics in keys.items()}
+            for preset, keys in summary["presets"].items()
+        },
+    }
+
+
 def train(args: argparse.Namespace) -> Path:
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
@@ -189,8 +320,6 @@ def train(args: argparse.Namespace) -> Path:
         torch.backends.cudnn.benchmark = True
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
-    if args.loader_workers < 0:
-        raise TrainingSetupError(f"--loader-workers {args.loader_workers}: must be 0 or more")
     if args.time_budget_s < 0:
         raise TrainingSetupError(f"--time-budget-s {args.time_budget_s}: must be 0 (none) or more")
     if args.init_time_conditioning is not None and (args.init_from is None or args.resume):
@@ -198,14 +327,17 @@ def train(args: argparse.Namespace) -> Path:
             f"--init-time-conditioning {args.init_time_conditioning}: needs --init-from and no --resume "
             "(it switches the variant of the network a new run starts from)"
         )
-    check_input_size(args.crop, args.crop)
-    paths = sorted(args.data.rglob("*.npz"))
+    crop_height, crop_width = parse_crop(args.crop)
+    keep = {p for p in args.presets.split(",") if p}
+    paths = [p for p in sorted(args.data.rglob("*.npz")) if not keep or preset_of(p) in keep]
     if not paths:
-        raise TrainingSetupError(f"{args.data}: no .npz sequences found")
+        raise TrainingSetupError(
+            f"{args.data}: no .npz sequences found" + (f" of the presets {sorted(keep)}" if keep else "")
+        )
     digest = manifest_digest(args.manifest)
     checkpoint_path = args.run_dir / "checkpoint.pt"
     train_config = {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()}
-    start_step, optimiser_state = 0, None
+    start_step, optimiser_state, continuation = 0, None, None
     if args.resume and checkpoint_path.exists():
         checkpoint = load_checkpoint(checkpoint_path)
         if checkpoint.manifest_sha256 != digest:
@@ -214,6 +346,9 @@ def train(args: argparse.Namespace) -> Path:
                 f"but --manifest hashes to {digest[:12]}"
             )
         network, start_step, optimiser_state = checkpoint.network, checkpoint.step, checkpoint.optimiser_state
+        continuation = checkpoint.continuation
+        for records in ("log.jsonl", "val.jsonl"):
+            drop_records_after(args.run_dir / records, start_step)
         log.info("resuming %s at step %d", checkpoint_path, start_step)
     elif args.init_from is not None:
         network = load_checkpoint(args.init_from).network
@@ -223,26 +358,25 @@ def train(args: argparse.Namespace) -> Path:
     else:
         seed_everything(args.seed)
         network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
-    log.info("loading %d sequences from %s", len(paths), args.data)
-    # Decompression releases the GIL: threads load a suite of dozens of sequences several times faster.
-    with ThreadPoolExecutor(max_workers=min(8, len(paths))) as pool:
-        sequences = list(tqdm(pool.map(load_sequence, paths), total=len(paths), desc="loading", unit="seq"))
-    keep = {p for p in args.presets.split(",") if p}
-    if keep:
-        sequences = [s for s in sequences if s.preset in keep]
-        if not sequences:
-            raise TrainingSetupError(f"{args.data}: no sequence of the presets {sorted(keep)}")
-    # Resumed runs reseed by step so the data stream continues instead of repeating.
-    seed_everything(args.seed + start_step)
-    sampler = ChunkSampler(
-        sequences,
-        args.chunk_windows,
-        args.crop,
-        args.max_contrast_events,
+    sampler = StreamSampler(
+        paths,
+        args.streams,
+        args.windows_per_step,
+        crop_height,
+        crop_width,
+        args.horizons,
+        args.max_contrast_events if args.contrast_weight > 0 else 0,
         not args.no_augment,
-        args.seed + start_step,
-        flow_at_arrival=args.flow_target == "arrival",
+        args.seed,
     )
+    if continuation is not None:
+        sampler.load_state_dict(continuation["data"])
+        restore_random_states(continuation["random"])
+    else:
+        seed_everything(args.seed + start_step)
+    validation = sorted(args.val_data.rglob("*.npz")) if args.val_data is not None else []
+    if args.val_data is not None and not validation:
+        raise TrainingSetupError(f"--val-data {args.val_data}: no .npz sequences found")
     weights = LossWeights(
         dice=args.dice_weight,
         positive=args.positive_weight,
@@ -259,47 +393,58 @@ def train(args: argparse.Namespace) -> Path:
     (args.run_dir / "config.json").write_text(
         json.dumps(
             {"train": train_config, "network": dataclasses.asdict(network.config), "loss": dataclasses.asdict(weights),
-             "manifest_sha256": digest, "sequences": [p.name for p in paths]},
+             "manifest_sha256": digest, "sequences": [str(p.relative_to(args.data)) for p in paths]},
             indent=2,
         )
     )
-    keep_steps = {int(v) for v in args.keep_checkpoints_at.split(",") if v}
     network.train()
-    drawn = chunk_batches(sampler, args.batch, args.loader_workers, args.seed + start_step)
+    states = replayed_states(network, sampler, device)
+    validation_sequences = [load_sequence(p) for p in validation]
+
+    def drawn_with_cursor() -> tuple[StreamStep, dict]:
+        drawn = sampler.step()
+        return drawn, sampler.state_dict()
+
+    # The next step's windows are built on the other core while this step computes; each comes
+    # with the data cursor just after it, which is what a checkpoint after that step stores.
+    drawing = ThreadPoolExecutor(max_workers=1, thread_name_prefix="windows")
+    upcoming = drawing.submit(drawn_with_cursor)
+    cursor = sampler.state_dict()
+
+    def save(path: Path, step: int) -> None:
+        save_checkpoint(
+            path, network, optimiser, step, digest, train_config, {"data": cursor, "random": random_states()}
+        )
+
+    def validate(step: int) -> None:
+        scores = validation_scores(network, validation_sequences, args.val_seconds)
+        with open(args.run_dir / "val.jsonl", "a") as val_file:
+            val_file.write(json.dumps({"step": step, **scores}) + "\n")
+        log.info("val at step %d: %s", step, json.dumps(scores["evimo-like"]))
+
     saved_step = start_step
     started = time.monotonic()
+    last_step = min(args.steps, args.stop_at_step) if args.stop_at_step > 0 else args.steps
     with open(args.run_dir / "log.jsonl", "a") as log_file, tqdm(
-        total=args.steps, initial=start_step, desc=f"train {network.config.size}", unit="step"
+        total=last_step, initial=start_step, desc=f"train {network.config.size}", unit="step"
     ) as progress:
-        last_step = min(args.steps, args.stop_at_step) if args.stop_at_step > 0 else args.steps
         for step in range(start_step, last_step):
-            elapsed = time.monotonic() - started
-            if args.time_budget_s > 0 and elapsed >= args.time_budget_s:
+            if args.time_budget_s > 0 and time.monotonic() - started >= args.time_budget_s:
                 last_step = step
                 log.info("time budget of %.0f s spent at step %d", args.time_budget_s, step)
                 break
-            elapsed_share = elapsed / args.time_budget_s if args.time_budget_s > 0 else 0.0
-            rate = learning_rate(step, args.steps, args.lr, args.warmup, elapsed_share)
+            rate = learning_rate(step, args.steps, args.lr, args.warmup)
             for group in optimiser.param_groups:
                 group["lr"] = rate
-            batches = [batch.to(device) for batch in next(drawn)]
-            crop = args.crop
-            states = network.initial_states(args.batch, crop, crop, device)
-            sums: dict[str, torch.Tensor] = {}
-            step_weights = forecast_ramped(weights, step, args.forecast_ramp_steps)
-            for index, batch in enumerate(batches):
-                out = network(batch.voxel, batch.horizons_ms, states)
-                states = out.states
-                with_contrast = not args.contrast_last_window_only or index == len(batches) - 1
-                for key, value in window_objective(out, batch, step_weights, with_contrast).items():
-                    sums[key] = sums.get(key, 0.0) + value / len(batches)
-            optimiser.zero_grad(set_to_none=True)
-            sums["total"].backward()
-            gradient_norm = torch.nn.utils.clip_grad_norm_(network.parameters(), 1.0)
-            optimiser.step()
+            drawn, cursor = upcoming.result()
+            if step + 1 < last_step:
+                upcoming = drawing.submit(drawn_with_cursor)
+            states, sums = train_step(
+                network, optimiser, drawn, states, forecast_ramped(weights, step, args.forecast_ramp_steps), args.bf16
+            )
             record = {k: round(float(v.detach()), 5) for k, v in sums.items()}
             record.update(
-                step=step + 1, lr=rate, grad_norm=round(float(gradient_norm), 4),
+                step=step + 1, lr=rate, stream_starts=int(drawn.starts.sum()),
                 elapsed_s=round(time.monotonic() - started, 1),
             )
             log_file.write(json.dumps(record) + "\n")
@@ -308,16 +453,15 @@ def train(args: argparse.Namespace) -> Path:
             progress.set_postfix(
                 loss=record["total"], mask=record["mask"], future=record["future_mask"], iou=record["mask_iou"]
             )
-            if (step + 1) % args.checkpoint_every == 0 or step + 1 in (last_step, *keep_steps):
-                save_checkpoint(checkpoint_path, network, optimiser, step + 1, digest, train_config)
+            if (step + 1) % args.checkpoint_every == 0 or step + 1 == last_step:
+                save(checkpoint_path, step + 1)
                 saved_step = step + 1
-            if step + 1 in keep_steps:
-                save_checkpoint(
-                    args.run_dir / f"checkpoint-step{step + 1}.pt", network, optimiser, step + 1, digest, train_config
-                )
+            if validation_sequences and ((step + 1) % args.val_every == 0 or step + 1 == last_step):
+                validate(step + 1)
+    drawing.shutdown(cancel_futures=True)
     if saved_step != last_step:
-        save_checkpoint(checkpoint_path, network, optimiser, last_step, digest, train_config)
-    log.info("finished at step %d in %.0f s; checkpoint %s", last_step, time.monotonic() - started, checkpoint_path)
+        save(checkpoint_path, last_step)
+    log.info("stopped at step %d in %.0f s; checkpoint %s", last_step, time.monotonic() - started, checkpoint_path)
     return checkpoint_path
 
 

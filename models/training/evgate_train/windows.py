@@ -1,18 +1,35 @@
-"""Training windows: one 50 ms window of a sequence, cropped, with its targets."""
+"""Training windows: one 50 ms window of a sequence, cropped, with targets at horizons of the
+10 ms ground-truth grid (what evaluation scores), not at the sequence's sampled horizons."""
 
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
-from .sequence import Sequence
+from .sequence import GRID_US, Sequence
 from .voxel import WINDOW_US, voxel_grid
+
+# Evaluation and the headline figures score the forecast at t + 100 ms: every reference time
+# trains it.
+SCORED_HORIZON_MS = 100
+GRID_HORIZONS_MS = tuple(range(GRID_US // 1000, SCORED_HORIZON_MS, GRID_US // 1000))
+# The object region of the flow loss reaches this far beyond the objects' footprints: the ring
+# is where a backward warp decides whether an edge moves or smears.
+REGION_DILATION_PX = 3
+
+
+class HorizonCountError(ValueError):
+    """A horizon count outside what the 10 ms grid below 100 ms can give."""
 
 
 @dataclass
 class Crop:
+    """A window of the padded frame; parts beyond the sensor are zero (background)."""
+
     left: int
     top: int
-    size: int
+    height: int
+    width: int
 
 
 @dataclass
@@ -27,18 +44,31 @@ class FutureEvents:
 
 @dataclass
 class TrainingWindow:
-    voxel: np.ndarray  # [2, S, S] float32
-    mask: np.ndarray  # [S, S] float32, 1 = IMO
+    voxel: np.ndarray  # [2, H, W] float32
+    mask: np.ndarray  # [H, W] float32, 1 = IMO
     mask_valid: bool  # the reference time has a ground-truth frame
     horizons_ms: np.ndarray  # [K] float32
-    future_mask: np.ndarray  # [K, S, S] float32
-    future_flow: np.ndarray  # [K, 2, S, S] float32, pixels
-    flow_valid: np.ndarray  # [K, S, S] bool
-    future_events: list[FutureEvents]  # K entries
+    future_mask: np.ndarray  # [K, H, W] float32
+    future_valid: np.ndarray  # [K] bool: t + h lies on the ground-truth grid
+    footprint: np.ndarray  # [K, H, W] bool: an object at t or at t + h
+    future_flow: np.ndarray  # [K, 2, H, W] float32, pixels
+    flow_valid: np.ndarray  # [K, H, W] bool
+    object_region: np.ndarray  # [K, H, W] bool: the footprint dilated by REGION_DILATION_PX
+    future_events: list[FutureEvents]  # K entries; empty arrays when not drawn
+
+
+def draw_horizons(rng: np.random.Generator, count: int) -> np.ndarray:
+    """`count` distinct horizons in ms: the scored 100 ms and `count - 1` of the grid below it."""
+    if not 1 <= count <= len(GRID_HORIZONS_MS) + 1:
+        raise HorizonCountError(
+            f"horizon count {count}: accepted 1 to {len(GRID_HORIZONS_MS) + 1} (100 ms and the 10 ms grid below it)"
+        )
+    others = rng.choice(GRID_HORIZONS_MS, count - 1, replace=False) if count > 1 else np.empty(0)
+    return np.concatenate([[SCORED_HORIZON_MS], np.sort(others)]).astype(np.float32)
 
 
 def reference_voxel(sequence: Sequence, reference: int) -> np.ndarray:
-    """The full-frame voxel grid [2, H, W] of the 50 ms window ending at reference time `reference`."""
+    """The full (padded) voxel grid [2, H, W] of the 50 ms window ending at reference time `reference`."""
     t_end = int(sequence.ref_ts[reference])
     window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
     return voxel_grid(
@@ -52,82 +82,143 @@ def reference_voxel(sequence: Sequence, reference: int) -> np.ndarray:
     )
 
 
-def arrival_flow(
-    sequence: Sequence, reference: int, grid_index: int | None, rows: slice, cols: slice, flow: np.ndarray,
-    flow_valid: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Backward warping reads the flow at the pixel an object reaches, but the simulator's flow
-    is defined at the pixel it leaves: ahead of a moving object it is the background's. Inside
-    each object's footprint at t + h this returns the object's mean flow at t (a rigid
-    translation); elsewhere, and without a mask at t, the simulator's flow."""
-    if grid_index is None:
-        return flow, flow_valid
-    ids_now = sequence.masks[grid_index]
-    future_ids = sequence.future_mask[reference, :, rows, cols]
-    flow, flow_valid = flow.copy(), flow_valid.copy()
-    for k in range(future_ids.shape[0]):
-        for object_id in np.unique(future_ids[k]):
-            if object_id == 0:
-                continue
-            vectors = sequence.future_flow[reference, k][ids_now == object_id].astype(np.float32)
-            vectors = vectors[np.isfinite(vectors).all(axis=1)]
-            if len(vectors) == 0:
-                continue
-            target = future_ids[k] == object_id
-            flow[k][:, target] = vectors.mean(axis=0)[:, None]
-            flow_valid[k][target] = True
-    return flow, flow_valid
+def cropped(array: np.ndarray, crop: Crop) -> np.ndarray:
+    """array[..., H, W] cut to the crop, zero beyond its last two axes' extent."""
+    out = np.zeros((*array.shape[:-2], crop.height, crop.width), array.dtype)
+    rows = min(crop.height, array.shape[-2] - crop.top)
+    cols = min(crop.width, array.shape[-1] - crop.left)
+    if rows > 0 and cols > 0:
+        out[..., :rows, :cols] = array[..., crop.top : crop.top + rows, crop.left : crop.left + cols]
+    return out
+
+
+@dataclass(frozen=True)
+class ObjectPlace:
+    centroid: np.ndarray  # (x, y)
+    touches_border: bool
+
+
+def object_places(ids: np.ndarray) -> dict[int, ObjectPlace]:
+    """Centroid of each object id in a full frame of ids, and whether it touches the border (its
+    centroid then moves with the clipping, not with the object)."""
+    places = {}
+    height, width = ids.shape
+    for index, found in enumerate(ndimage.find_objects(ids)):
+        if found is None:
+            continue
+        object_id = index + 1
+        rows, cols = found
+        centroid = ndimage.center_of_mass(ids == object_id)
+        touches = rows.start == 0 or cols.start == 0 or rows.stop == height or cols.stop == width
+        places[object_id] = ObjectPlace(np.array([centroid[1], centroid[0]], np.float32), touches)
+    return places
+
+
+def background_flow(sequence: Sequence, reference: int, horizon_ms: float) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's flow [2, H, W] at the sequence's longest sampled horizon, scaled to
+    `horizon_ms` (the camera's motion is close to constant over 100 ms), and where it is finite."""
+    sampled = sequence.horizon_us[reference]
+    longest = int(np.argmax(sampled))
+    if sampled[longest] < GRID_US:
+        shape = (sequence.height, sequence.width)
+        return np.zeros((2, *shape), np.float32), np.zeros(shape, bool)
+    flow = sequence.future_flow[reference, longest].astype(np.float32).transpose(2, 0, 1)
+    valid = np.isfinite(flow).all(axis=0)
+    scale = horizon_ms * 1000.0 / float(sampled[longest])
+    return np.where(np.isfinite(flow), flow * scale, 0.0).astype(np.float32), valid
+
+
+def flow_target(
+    ids_now: np.ndarray | None, ids_future: np.ndarray, background: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(flow [2, H, W], valid [H, W], footprint, object region) over the full frame.
+
+    Inside each object's region (its footprint at t and at t + h, dilated) the flow is the
+    object's displacement between the two frames: backward warping reads at the pixel an object
+    reaches the displacement that brings it there, and in the strip it uncovers one that reads
+    background. Objects clipped by the border, or present at only one of the two times, keep the
+    simulator's (scaled) flow."""
+    flow, valid = background[0].copy(), background[1].copy()
+    footprint = ids_future > 0
+    if ids_now is not None:
+        footprint |= ids_now > 0
+    region = ndimage.binary_dilation(footprint, iterations=REGION_DILATION_PX) if footprint.any() else footprint
+    if ids_now is None:
+        return flow, valid, footprint, region
+    now, future = object_places(ids_now), object_places(ids_future)
+    for object_id in now.keys() & future.keys():
+        if now[object_id].touches_border or future[object_id].touches_border:
+            continue
+        pixels = ndimage.binary_dilation((ids_now == object_id) | (ids_future == object_id), iterations=REGION_DILATION_PX)
+        flow[:, pixels] = (future[object_id].centroid - now[object_id].centroid)[:, None]
+        valid[pixels] = True
+    return flow, valid, footprint, region
+
+
+def future_events(
+    sequence: Sequence, t_end: int, horizon_ms: float, crop: Crop, max_events: int, rng: np.random.Generator
+) -> FutureEvents:
+    future = sequence.event_range(t_end, t_end + int(horizon_ms * 1000))
+    x = sequence.events_x[future].astype(np.int64) - crop.left
+    y = sequence.events_y[future].astype(np.int64) - crop.top
+    inside = np.flatnonzero((x >= 0) & (x < crop.width) & (y >= 0) & (y < crop.height))
+    if inside.size > max_events:
+        inside = np.sort(rng.choice(inside, max_events, replace=False))
+    return FutureEvents(
+        x=x[inside].astype(np.float32),
+        y=y[inside].astype(np.float32),
+        t_ms=(sequence.events_t[future][inside] - t_end).astype(np.float32) / 1000.0,
+        on=sequence.events_on[future][inside],
+    )
+
+
+NO_EVENTS = FutureEvents(*(np.empty(0, np.float32) for _ in range(3)), np.empty(0, bool))
 
 
 def training_window(
     sequence: Sequence,
     reference: int,
     crop: Crop,
+    horizons_ms: np.ndarray,
+    full_voxel: np.ndarray,
     max_events: int,
     rng: np.random.Generator,
-    full: np.ndarray,
-    flow_at_arrival: bool = False,
 ) -> TrainingWindow:
-    """`full` is `reference_voxel(sequence, reference)`, passed in so callers can cache it;
-    `flow_at_arrival` replaces the flow target inside objects' future footprints (`arrival_flow`)."""
+    """`full_voxel` is `reference_voxel(sequence, reference)`; future events (for contrast
+    maximisation) are drawn only when `max_events` > 0."""
     t_end = int(sequence.ref_ts[reference])
-    rows = slice(crop.top, crop.top + crop.size)
-    cols = slice(crop.left, crop.left + crop.size)
-    grid_index = sequence.grid_index(t_end)
-    mask = (
-        (sequence.masks[grid_index, rows, cols] > 0).astype(np.float32)
-        if grid_index is not None
-        else np.zeros((crop.size, crop.size), np.float32)
-    )
-    horizons_us = sequence.horizon_us[reference]
-    flow = sequence.future_flow[reference, :, rows, cols, :].astype(np.float32).transpose(0, 3, 1, 2)
-    flow_valid = np.isfinite(flow).all(axis=1)
-    if flow_at_arrival:
-        flow, flow_valid = arrival_flow(sequence, reference, grid_index, rows, cols, flow, flow_valid)
+    now = sequence.grid_index(t_end)
+    ids_now = sequence.masks[now] if now is not None else None
+    shape = (sequence.height, sequence.width)
+    horizons = len(horizons_ms)
+    future_mask = np.zeros((horizons, *shape), np.float32)
+    future_valid = np.zeros(horizons, bool)
+    flows = np.zeros((horizons, 2, *shape), np.float32)
+    flow_valid = np.zeros((horizons, *shape), bool)
+    footprints = np.zeros((horizons, *shape), bool)
+    regions = np.zeros((horizons, *shape), bool)
     events = []
-    for horizon in horizons_us:
-        future = sequence.event_range(t_end, t_end + int(horizon))
-        x = sequence.events_x[future].astype(np.int64) - crop.left
-        y = sequence.events_y[future].astype(np.int64) - crop.top
-        inside = np.flatnonzero((x >= 0) & (x < crop.size) & (y >= 0) & (y < crop.size))
-        if inside.size > max_events:
-            inside = np.sort(rng.choice(inside, max_events, replace=False))
-        t_ms = (sequence.events_t[future][inside] - t_end).astype(np.float32) / 1000.0
-        events.append(
-            FutureEvents(
-                x=x[inside].astype(np.float32),
-                y=y[inside].astype(np.float32),
-                t_ms=t_ms,
-                on=sequence.events_on[future][inside],
+    for k, horizon in enumerate(horizons_ms):
+        future = sequence.grid_index(t_end + int(round(horizon * 1000)))
+        if future is not None:
+            ids_future = sequence.masks[future]
+            future_valid[k] = True
+            future_mask[k] = ids_future > 0
+            flows[k], flow_valid[k], footprints[k], regions[k] = flow_target(
+                ids_now, ids_future, background_flow(sequence, reference, float(horizon))
             )
-        )
+        events.append(future_events(sequence, t_end, float(horizon), crop, max_events, rng) if max_events > 0 else NO_EVENTS)
+    mask = (ids_now > 0).astype(np.float32) if ids_now is not None else np.zeros(shape, np.float32)
     return TrainingWindow(
-        voxel=np.ascontiguousarray(full[:, rows, cols]),
-        mask=mask,
-        mask_valid=grid_index is not None,
-        horizons_ms=(horizons_us / 1000.0).astype(np.float32),
-        future_mask=(sequence.future_mask[reference, :, rows, cols] > 0).astype(np.float32),
-        future_flow=np.where(np.isfinite(flow), flow, 0.0).astype(np.float32),
-        flow_valid=flow_valid,
+        voxel=cropped(full_voxel, crop),
+        mask=cropped(mask, crop),
+        mask_valid=now is not None,
+        horizons_ms=np.asarray(horizons_ms, np.float32),
+        future_mask=cropped(future_mask, crop),
+        future_valid=future_valid,
+        footprint=cropped(footprints, crop),
+        future_flow=cropped(flows, crop),
+        flow_valid=cropped(flow_valid, crop),
+        object_region=cropped(regions, crop),
         future_events=events,
     )

@@ -65,6 +65,17 @@ def events(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
     return t[order], np.concatenate(xs)[order], np.concatenate(ys)[order], np.concatenate(ps)[order]
 
 
+def labels(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """1 for the events the square fires (its pixels in the frame before or after the change)."""
+    out = np.zeros(t.size, np.uint16)
+    ms = (t + 999) // 1000
+    for step in np.unique(ms):
+        at = ms == step
+        on_square = (object_mask(step)[y[at], x[at]] | object_mask(step - 1)[y[at], x[at]]) > 0
+        out[np.flatnonzero(at)[on_square]] = 1
+    return out
+
+
 def write_sequence(path: Path, seed: int = 0, horizons_per_reference: int = 2) -> Path:
     rng = np.random.default_rng(seed + 1)
     t, x, y, on = events(seed)
@@ -84,7 +95,7 @@ def write_sequence(path: Path, seed: int = 0, horizons_per_reference: int = 2) -
         events_t=t,
         events_xy=np.stack([x, y], axis=1).astype(np.uint16),
         events_p=on,
-        events_label=np.zeros(t.size, np.uint16),
+        events_label=labels(t, x, y),
         resolution=np.array([WIDTH, HEIGHT], np.int64),
         K=np.eye(3),
         gt_ts=gt_ts,

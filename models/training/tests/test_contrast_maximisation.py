@@ -5,7 +5,7 @@ import pytest
 import torch
 from synthetic_sequence import HEIGHT, SPEED_PX_PER_MS, WIDTH, events
 
-from evgate_train.batches import ChunkSampler
+from evgate_train.streams import StreamSampler
 from evgate_train.contrast_maximisation import average_timestamp_loss, batched_average_timestamp_loss
 from evgate_train.network import NetworkConfig, SuppressionNetwork
 from evgate_train.objective import LossWeights, window_objective
@@ -128,13 +128,13 @@ def _contrast_by_pair_loop(velocity: torch.Tensor, batch, weights: LossWeights) 
 
 @pytest.fixture(scope="module")
 def synthetic_batch(synthetic_dir):
-    sequences = [load_sequence(synthetic_dir / name) for name in ("slide-0.npz", "slide-1.npz")]
-    sampler = ChunkSampler(sequences, 1, 48, 2000, augment=True, seed=4)
-    return sampler.sample(6)[0]
+    paths = [synthetic_dir / name for name in ("slide-0.npz", "slide-1.npz")]
+    sampler = StreamSampler(paths, 6, 1, 48, 48, 4, 2000, augment=True, seed=4)
+    return sampler.step().windows[0]
 
 
 def test_window_objective_contrast_equals_the_per_pair_loop(synthetic_batch):
-    weights = LossWeights(contrast_min_horizon_ms=30.0, contrast_min_events=250)
+    weights = LossWeights(contrast=1.0, contrast_min_horizon_ms=45.0, contrast_min_events=200)
     horizons = synthetic_batch.host_horizons_ms.reshape(-1)
     counts = np.array([len(e.x) for e in sum(synthetic_batch.future_events, [])])
     long_enough = horizons >= weights.contrast_min_horizon_ms

@@ -20,6 +20,7 @@ def _batch(mask_valid: bool) -> SimpleNamespace:
         mask=_square(4).view(1, 1, SIZE, SIZE),
         future_mask=torch.stack([_square(4 + SHIFT_PX), _square(4 + 2 * SHIFT_PX)]).unsqueeze(0),
         mask_valid=torch.tensor([mask_valid]),
+        future_valid=torch.tensor([[True, True]]),
     )
 
 

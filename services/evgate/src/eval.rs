@@ -15,7 +15,7 @@ use evgate_eval::{
     read_recording, write_report, EvalConfig, Evaluation, FlopTable, InputOptions, LoadedModel,
     Report,
 };
-use evgate_model::{ModelRuntime, Provider, RuntimeOptions};
+use evgate_model::{Forecaster, ModelRuntime, Provider, RuntimeOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use models::{select_models, ModelSpec, DEFAULT_MODEL};
@@ -23,7 +23,7 @@ use models::{select_models, ModelSpec, DEFAULT_MODEL};
 /// Where the network's parameters and GFLOPs are looked up when `--model-flops` is not given:
 /// the committed table first, then the training code's output folder.
 const DEFAULT_FLOPS_TABLES: [&str; 2] = [
-    "models/reports/flops.json",
+    "evidence/models/flops.json",
     "models/training/runs/flops.json",
 ];
 
@@ -93,7 +93,7 @@ pub struct EvalArgs {
     /// GFLOPs per model size (the JSON of `python -m evgate_train.flops`) for tables III and
     /// VII, used where a row's parameter count is the model file's (within the 1 % that folded
     /// batch norm explains); default:
-    /// models/reports/flops.json, else models/training/runs/flops.json, when present.
+    /// evidence/models/flops.json, else models/training/runs/flops.json, when present.
     #[arg(long)]
     pub model_flops: Option<PathBuf>,
     /// Print the overall summary as JSON on stdout instead of text.
@@ -160,7 +160,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         // A folder of variants may hold a copy of the model under test: evaluate it once.
         let same = models
             .iter()
-            .find(|m| m.runtime.model_id() == runtime.model_id());
+            .find(|m| m.forecaster.runtime().model_id() == runtime.model_id());
         if let (true, Some(same)) = (spec.from_folder, same) {
             tracing::info!(
                 path = %spec.path.display(),
@@ -178,9 +178,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             steps = metadata.train_steps,
             "loaded"
         );
+        let threshold_logit = metadata.threshold_logit;
         models.push(LoadedModel {
             label: spec.label.clone(),
-            runtime,
+            forecaster: Forecaster::new(runtime, threshold_logit, 1),
         });
     }
 

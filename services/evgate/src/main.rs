@@ -50,7 +50,7 @@ fn main() -> anyhow::Result<()> {
         // Long jobs (`sim suite`, `eval`) are often logged to a file, where colour codes are noise.
         .with_ansi(std::io::stderr().is_terminal())
         .init();
-    let cli = Cli::parse();
+    let cli: Cli = evgate_ipc::parse_with_config_file(&["run"]);
     match cli.command {
         Command::Sim(args) => sim::run(args),
         Command::Render(args) => render::run(args),

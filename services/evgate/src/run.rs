@@ -5,15 +5,18 @@
 
 mod children;
 mod default_model;
+mod metrics;
 mod scoring;
+mod service_configs;
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
+use evgate_core::{GateMode, NoForecast};
 use evgate_ipc::{
     create_node, BatchHeader, LatestSubscriber, PipelineNames, PipelineStats, Qos, SliceSubscriber,
-    Stream,
+    Stream, WaitStrategy,
 };
 use iceoryx2::prelude::{CallbackProgression, WaitSetAttachmentId, WaitSetBuilder};
 use iceoryx2::waitset::WaitSetRunResult;
@@ -22,31 +25,25 @@ use serde::Serialize;
 use tracing::{info, warn};
 
 use children::{binary_directory, Service};
-use scoring::{Scorer, Scores, Wanted};
-
-/// Which events the pipeline keeps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum RunMode {
-    /// Keep the events of independently moving objects.
-    KeepMovingObjects,
-    /// Keep the ego-motion events.
-    KeepEgoMotion,
-}
-
-impl RunMode {
-    fn flag(self) -> &'static str {
-        match self {
-            RunMode::KeepMovingObjects => "keep-moving-objects",
-            RunMode::KeepEgoMotion => "keep-ego-motion",
-        }
-    }
-}
+use clap::Parser;
+use default_model::ModelChoice;
+use evgate_gate::Output;
+use evgate_ipc::Overflow;
+use scoring::{Scorer, Scores};
+use service_configs::ServiceConfigs;
 
 /// Arguments of `evgate run`.
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
+    /// TOML file of defaults (example: examples/config/run.toml): its keys are this command's
+    /// flags without the dashes, a string or number for a flag that takes a value, true or
+    /// false for a switch; a flag given on the command line overrides its key.
+    #[arg(long)]
+    config: Option<PathBuf>,
     /// Recording to replay: any format evgate-io decodes, or a labelled-sequence .npz (then
-    /// scored against its labels); without it, the built-in simulated camera.
+    /// scored against its labels); or a live AEDAT 4 network stream, tcp://HOST:PORT or
+    /// unix:///PATH (a DV camera through the DV runtime, dv-processing's NetworkWriter);
+    /// without it, the built-in simulated camera.
     #[arg(long)]
     input: Option<PathBuf>,
     /// Sensor size of --input as WIDTHxHEIGHT: required for files that give none (text), and
@@ -65,10 +62,16 @@ pub struct RunArgs {
     duration: Option<f64>,
     /// Exported network the inference runs; default: the shipped export for the source's
     /// sensor size, models/evgate-S.onnx (sensors padding to 352×272, such as 346×260) or
-    /// models/evgate-S-640x480.onnx (640×480), looked for in the executable's directory and
-    /// its ancestors, and used only where no other user could have put it.
+    /// models/evgate-S-640x480.onnx (640×480; larger sensors binned to fit, see
+    /// --downsample), looked for in the executable's directory and its ancestors, and used
+    /// only where no other user could have put it.
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Bin the sensor's pixels N×N for the network (events are still gated at full
+    /// resolution); default: 1, or without --model, for a sensor larger than every shipped
+    /// export, the smallest N up to 8 that fits the 352×272 one (1280×720: 4).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=16))]
+    downsample: Option<u16>,
     /// Execution provider of the inference service: cpu, cuda (falls back to cpu with a
     /// warning when CUDA cannot be used) or auto.
     #[arg(long, default_value = "cpu")]
@@ -78,13 +81,28 @@ pub struct RunArgs {
     no_infer: bool,
     /// Which events pass.
     #[arg(long, value_enum, default_value = "keep-moving-objects")]
-    mode: RunMode,
-    /// Fate of events no valid forecast judges: pass, drop or last-mask.
-    #[arg(long, default_value = "pass")]
-    no_forecast: String,
+    mode: GateMode,
+    /// Fate of events no valid forecast judges.
+    #[arg(long, value_enum, default_value = "pass")]
+    no_forecast: NoForecast,
+    /// How the gate and the inference service wait for their input: event (sleep until
+    /// notified) or busy-poll (lowest latency, one core each at 100 %; see --gate-cpu and
+    /// --infer-cpu).
+    #[arg(long, value_enum, default_value = "event")]
+    wait: WaitStrategy,
+    /// Pin the gate's thread to this CPU.
+    #[arg(long)]
+    gate_cpu: Option<usize>,
+    /// Pin the inference service's loop thread to this CPU.
+    #[arg(long)]
+    infer_cpu: Option<usize>,
     /// Publish events as fast as possible instead of at the pace of their timestamps.
     #[arg(long)]
     fast: bool,
+    /// Replay --input from its start again whenever it ends (stream time keeps increasing),
+    /// until --duration or a signal.
+    #[arg(long = "loop", requires = "input")]
+    loop_input: bool,
     /// Batch span in milliseconds.
     #[arg(long, default_value_t = 1.0)]
     batch_ms: f64,
@@ -97,6 +115,14 @@ pub struct RunArgs {
     /// Refresh period of the status line, milliseconds.
     #[arg(long, default_value_t = 250)]
     status_interval_ms: u64,
+    /// Also serve the kept events as an AEDAT 4 network stream on tcp://HOST:PORT or
+    /// unix:///PATH (evgate-gate --serve-kept), for DV tools and dv-processing's NetworkReader.
+    #[arg(long)]
+    serve_kept: Option<String>,
+    /// Serve Prometheus metrics at http://HOST:PORT/metrics: the gate's event and forecast
+    /// counters, and the model runtime and prediction age sampled at each stats publication.
+    #[arg(long)]
+    metrics_addr: Option<String>,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -137,17 +163,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             bail!("--duration = {duration} must be a positive number of seconds");
         }
     }
-    const POLICIES: [&str; 3] = ["pass", "drop", "last-mask"];
-    if !POLICIES.contains(&args.no_forecast.as_str()) {
-        bail!(
-            "--no-forecast = {:?} is not a policy; accepted: {}",
-            args.no_forecast,
-            POLICIES.join(", ")
-        );
-    }
     let model = match (&args.model, args.no_infer) {
         (_, true) => None,
-        (Some(model), false) if model.is_file() => Some(model.clone()),
+        (Some(model), false) if model.is_file() => Some(ModelChoice {
+            path: model.clone(),
+            downsample: args.downsample.unwrap_or(1),
+        }),
         (Some(model), false) => bail!(
             "model {} not found: export one (models/training) or pass another --model, or run \
              with --no-infer",
@@ -157,7 +178,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             let sensor =
                 default_model::source_sensor(args.input.as_deref(), args.sensor, &args.preset)?;
             let search_from: Vec<PathBuf> = binary_directory().into_iter().collect();
-            Some(default_model::shipped_model_for(sensor, &search_from)?)
+            Some(default_model::shipped_model_for(
+                sensor,
+                args.downsample,
+                &search_from,
+            )?)
         }
     };
     let domain = args
@@ -175,72 +200,61 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let stats = LatestSubscriber::<PipelineStats>::open(&node, &names, Stream::Stats)?;
 
     let directory = binary_directory()?;
-    let common = vec![
-        "--domain".to_owned(),
-        domain.clone(),
-        "--camera".to_owned(),
-        args.camera.clone(),
-    ];
-    let mut gate_args = common.clone();
-    gate_args.extend([
-        "--mode".to_owned(),
-        args.mode.flag().to_owned(),
-        "--no-forecast".to_owned(),
-        args.no_forecast.clone(),
-        "--outputs".to_owned(),
-        "kept,suppressed,keep-bitmap".to_owned(),
-        // The scores need every bitmap; this reader keeps up, so blocking costs nothing.
-        "--overflow".to_owned(),
-        "block".to_owned(),
-        "--exit-at-end-of-stream".to_owned(),
-        "--json".to_owned(),
-    ]);
+    // Each service gets its typed configuration as its own --config file.
+    let configs = ServiceConfigs::new()?;
+    let mut gate = evgate_gate::Config::parse_from(["evgate-gate"]);
+    gate.domain = domain.clone();
+    gate.camera = args.camera.clone();
+    gate.mode = args.mode;
+    gate.no_forecast = args.no_forecast;
+    gate.wait = args.wait;
+    gate.outputs = vec![Output::Kept, Output::Suppressed, Output::KeepBitmap];
+    // The scores need every bitmap; this reader keeps up, so blocking costs nothing.
+    gate.overflow = Overflow::Block;
+    gate.exit_at_end_of_stream = true;
+    gate.json = true;
+    gate.cpu = args.gate_cpu;
+    gate.serve_kept = args.serve_kept.clone();
+    let gate_args = configs.arguments("evgate-gate", &gate)?;
     let mut services = vec![Service::start(&directory, "evgate-gate", &gate_args)?];
     if let Some(model) = &model {
-        let mut infer_args = common.clone();
-        infer_args.extend([
-            "--model".to_owned(),
-            model.display().to_string(),
-            "--provider".to_owned(),
-            args.provider.to_string(),
-            "--exit-at-end".to_owned(),
-        ]);
+        let mut infer = evgate_infer::Config::parse_from(["evgate-infer"]);
+        infer.domain = domain.clone();
+        infer.camera = args.camera.clone();
+        infer.model = model.path.clone();
+        infer.downsample = model.downsample;
+        infer.provider = args.provider;
+        infer.exit_at_end = true;
+        infer.wait = args.wait;
+        infer.cpu = args.infer_cpu;
+        let infer_args = configs.arguments("evgate-infer", &infer)?;
         services.push(Service::start(&directory, "evgate-infer", &infer_args)?);
     }
-    let mut ingest_args = common;
-    ingest_args.extend([
-        "--wait-for-subscribers".to_owned(),
-        services.len().to_string(),
-        "--batch-ms".to_owned(),
-        args.batch_ms.to_string(),
-        "--json".to_owned(),
-    ]);
+    let mut ingest = evgate_ingest::Config::parse_from(["evgate-ingest"]);
+    ingest.domain = domain.clone();
+    ingest.camera = args.camera.clone();
+    ingest.wait_for_subscribers = services.len();
+    ingest.batch_ms = args.batch_ms;
+    ingest.json = true;
+    ingest.fast = args.fast;
+    ingest.repeat = args.loop_input;
     let source = match &args.input {
         Some(path) => {
-            ingest_args.extend(["--input".to_owned(), path.display().to_string()]);
-            if let Some(sensor) = args.sensor {
-                ingest_args.extend(["--sensor".to_owned(), sensor.to_string()]);
-            }
+            ingest.input = Some(path.clone());
+            ingest.sensor = args.sensor;
             path.display().to_string()
         }
         None => {
-            ingest_args.extend([
-                "--preset".to_owned(),
-                args.preset.clone(),
-                "--seed".to_owned(),
-                args.seed.to_string(),
-                "--sim-duration-s".to_owned(),
-                args.duration.unwrap_or(10.0).to_string(),
-            ]);
+            ingest.preset = args.preset.parse()?;
+            ingest.seed = args.seed;
+            ingest.sim_duration_s = args.duration.unwrap_or(10.0);
             format!(
                 "simulated camera, preset {} seed {}",
                 args.preset, args.seed
             )
         }
     };
-    if args.fast {
-        ingest_args.push("--fast".to_owned());
-    }
+    let ingest_args = configs.arguments("evgate-ingest", &ingest)?;
     services.push(Service::start(&directory, "evgate-ingest", &ingest_args)?);
     info!(%domain, %source, "pipeline started");
 
@@ -257,14 +271,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .attach_interval(Duration::from_millis(args.status_interval_ms.max(1)))
         .context("cannot attach the status interval")?;
 
-    let wanted = match args.mode {
-        RunMode::KeepMovingObjects => Wanted::MovingObjects,
-        RunMode::KeepEgoMotion => Wanted::EgoMotion,
-    };
-    let mut scorer = Scorer::new(wanted);
+    let mut scorer = Scorer::new(args.mode);
     let mut saw_labels = false;
     let mut end_of_stream = false;
     let mut latest_stats: Option<PipelineStats> = None;
+    let mut metrics = args
+        .metrics_addr
+        .as_deref()
+        .map(metrics::RunMetrics::serve)
+        .transpose()?;
     let mut previous: Option<(Instant, PipelineStats)> = None;
     let mut ended_by = "end-of-stream";
     let mut failure: Option<anyhow::Error> = None;
@@ -303,6 +318,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                 if attachment.has_event_from(&status_tick) {
                     if let Some(fresh) = stats.latest()? {
                         latest_stats = Some(fresh);
+                        if let Some(metrics) = &mut metrics {
+                            metrics.update(&fresh);
+                        }
                     }
                     if let Some(current) = latest_stats {
                         status.set_message(status_line(previous.as_ref(), &current));
@@ -310,13 +328,14 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                     }
                     status.tick();
                     for service in services.iter_mut() {
-                        if service.has_exited()? && !service.status.is_some_and(|s| s.success()) {
-                            bail!(
-                                "{} (pid {}) failed: {:?}",
-                                service.binary,
-                                service.pid(),
-                                service.status
-                            );
+                        if let Some(status) = service.status()? {
+                            if !status.success() {
+                                bail!(
+                                    "{} (pid {}) failed: {status}",
+                                    service.binary,
+                                    service.pid()
+                                );
+                            }
                         }
                     }
                     if wall_limit.is_some_and(|limit| started.elapsed() >= limit) {

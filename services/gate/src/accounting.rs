@@ -3,7 +3,7 @@
 use evgate_ipc::{BatchHeader, PipelineStats};
 use tracing::{info, warn};
 
-use crate::judge::Verdict;
+use evgate_core::Verdict;
 
 /// The stats of the current input stream.
 pub struct Accounting {

@@ -1,6 +1,6 @@
 //! The newest valid forecast, copied out of shared memory so the sample is returned at once.
 
-use evgate_core::{words_for, ForecastView, GateError, MaskError, MaskView, SensorSize};
+use evgate_core::{words_for, Forecast, ForecastView, GateError, MaskError, MaskView, SensorSize};
 use evgate_ipc::{ForecastError, ForecastHeader};
 
 /// Why a received forecast was ignored.
@@ -33,7 +33,7 @@ impl StoredForecast {
         };
         let sensor = stored.sensor();
         header
-            .validate(words_for(sensor), stored.words.len())
+            .validate(words_for(sensor.pixels()), stored.words.len())
             .map_err(|source| RejectedForecast::Header {
                 sequence: header.sequence,
                 source,
@@ -66,16 +66,12 @@ impl StoredForecast {
         )
     }
 
-    /// The mask at the reference time.
-    pub fn current_mask(&self) -> MaskView<'_> {
-        MaskView::new(self.sensor(), self.header.mask_words(&self.words, 0))
-            .expect("validated when stored")
-    }
-
-    /// The mask of the farthest horizon.
-    pub fn last_mask(&self) -> MaskView<'_> {
-        let last = self.header.mask_count() - 1;
-        MaskView::new(self.sensor(), self.header.mask_words(&self.words, last))
-            .expect("validated when stored")
+    /// The forecast as the judge reads it.
+    pub fn forecast(&self) -> Forecast<'_> {
+        Forecast {
+            current: MaskView::new(self.sensor(), self.header.mask_words(&self.words, 0))
+                .expect("validated when stored"),
+            horizons: self.view().expect("validated when stored"),
+        }
     }
 }

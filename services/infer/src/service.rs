@@ -7,30 +7,35 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context};
 use evgate_core::{words_for, Event, SensorSize};
 use evgate_ipc::{
-    clock, create_node, BatchHeader, ForecastHeader, PipelineNames, Qos, SlicePublisher,
-    SliceSubscriber, Stream, MAX_HORIZONS,
+    clock, create_node, pin_current_thread, BatchHeader, ForecastHeader, PipelineNames, Qos,
+    SlicePublisher, SliceSubscriber, Stream, MAX_HORIZONS,
 };
-use evgate_model::{ModelRuntime, RuntimeOptions};
+use evgate_model::{Forecaster, ModelRuntime, RuntimeOptions};
 use tracing::{error, info, warn};
 
-use crate::args::InferArgs;
+use crate::config::Config;
+use crate::error::InferError;
 use crate::horizons::{horizon_us, resolve_horizons};
 use crate::latest_slot::LatestSlot;
+use crate::loop_wait::LoopWait;
+use crate::metrics::InferMetrics;
 use crate::stats::{InferCounters, InferReport, RunDescription};
 use crate::windowing::{ClosedWindow, WindowAssembler, WindowMode};
 use crate::worker::{ForecastReady, WindowJob, Worker, WorkerError};
 
 /// Runs until SIGINT/SIGTERM (or the end of the stream with `--exit-at-end`) and returns the
 /// final stats.
-pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
+pub fn run(args: &Config) -> Result<InferReport, InferError> {
+    if let Some(cpu) = args.cpu {
+        pin_current_thread(cpu)?;
+    }
     let node = create_node("evgate-infer")?;
     // iceoryx2 installs its SIGINT/SIGTERM handlers on the first wait; doing it now, before the
     // model loads, turns an early Ctrl-C into a clean stop instead of the default kill.
     if evgate_ipc::stop_requested(&node, Duration::ZERO) {
-        bail!("stopped by SIGINT or SIGTERM before starting");
+        return Err(InferError::StoppedBeforeStart);
     }
     let options = RuntimeOptions {
         provider: args.provider,
@@ -47,6 +52,12 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
     // past a first window that on CUDA took 2 s (H200: cuDNN's algorithm search).
     let warm_up = runtime.warm_up(&horizons_ms)?;
     info!(warm_up_ms = warm_up.as_secs_f64() * 1e3, "model warmed up");
+    let threshold_logit = args.threshold_logit.unwrap_or(metadata.threshold_logit);
+    if !threshold_logit.is_finite() {
+        return Err(InferError::ThresholdLogit {
+            value: threshold_logit,
+        });
+    }
     let window_us = i64::from(metadata.window_ms) * 1000;
     let mode = match args.window_events {
         Some(events) => WindowMode::EventCount { events },
@@ -66,6 +77,8 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
         state_bound: runtime.state_bound(),
         warm_up_ms: warm_up.as_secs_f64() * 1e3,
         threads: args.threads,
+        threshold_logit,
+        downsample: args.downsample,
         horizons_ms: horizons_ms.clone(),
         windowing: describe(mode),
     };
@@ -95,11 +108,14 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
     let (result_sender, results) = mpsc::channel();
     let worker = {
         let slot = Arc::clone(&slot);
-        let worker = Worker::new(runtime, horizons_ms.clone(), args.threshold_logit);
+        let worker = Worker::new(
+            Forecaster::new(runtime, threshold_logit, args.downsample),
+            horizons_ms.clone(),
+        );
         std::thread::Builder::new()
             .name("evgate-infer-model".to_owned())
             .spawn(move || worker.run(slot, result_sender))
-            .context("cannot start the inference thread")?
+            .map_err(InferError::Thread)?
     };
 
     let mut state = LoopState {
@@ -113,24 +129,32 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
         jobs_in_flight: 0,
         forecast_sequence: 0,
         closed: Vec::new(),
+        metrics: args
+            .metrics_addr
+            .as_deref()
+            .map(InferMetrics::serve)
+            .transpose()?,
     };
     let started = Instant::now();
     let stats_interval =
         (args.stats_interval_s > 0.0).then(|| Duration::from_secs_f64(args.stats_interval_s));
     let mut last_stats = Instant::now();
-    let cycle = Duration::from_micros(args.cycle_us.max(1));
+    let mut wait = LoopWait::new(args.wait, Duration::from_micros(args.cycle_us.max(1)));
 
     let outcome = loop {
-        if evgate_ipc::stop_requested(&node, cycle) {
+        if wait.stop_requested(&node) {
             info!("stopping on SIGINT or SIGTERM");
             break Ok(());
         }
-        if let Err(failure) = state.receive_batches(&events, &mut assembler, &slot) {
-            break Err(failure);
-        }
+        let worked = match state.receive_batches(&events, &mut assembler, &slot) {
+            Ok(batches) => batches > 0,
+            Err(failure) => break Err(failure),
+        };
         match state.publish_results(&results, &forecasts) {
-            Ok(true) => {}
-            Ok(false) => break Err(anyhow::anyhow!("the inference thread stopped unexpectedly")),
+            Ok(Published::Forecasts) => wait.worked(),
+            Ok(Published::Nothing) if worked => wait.worked(),
+            Ok(Published::Nothing) => wait.idle(),
+            Ok(Published::WorkerStopped) => break Err(InferError::WorkerStopped),
             Err(failure) => break Err(failure),
         }
         if stats_interval.is_some_and(|interval| last_stats.elapsed() >= interval) {
@@ -158,6 +182,14 @@ pub fn run(args: &InferArgs) -> anyhow::Result<InferReport> {
     outcome.map(|()| report)
 }
 
+/// What a look at the inference thread's results found.
+enum Published {
+    Nothing,
+    Forecasts,
+    /// The inference thread went away with windows still in flight.
+    WorkerStopped,
+}
+
 struct LoopState {
     description: RunDescription,
     horizons_us: Vec<i64>,
@@ -172,6 +204,7 @@ struct LoopState {
     jobs_in_flight: u64,
     forecast_sequence: u64,
     closed: Vec<ClosedWindow>,
+    metrics: Option<InferMetrics>,
 }
 
 impl LoopState {
@@ -180,9 +213,11 @@ impl LoopState {
         events: &SliceSubscriber<Event, BatchHeader>,
         assembler: &mut WindowAssembler,
         slot: &LatestSlot<WindowJob>,
-    ) -> anyhow::Result<()> {
+    ) -> Result<u32, InferError> {
         events.clear_wakeups();
+        let mut batches = 0;
         while let Some(sample) = events.receive()? {
+            batches += 1;
             // Copied before it is checked: the publisher may still write the shared memory.
             let header = *sample.user_header();
             if let Err(error) = header.validate(sample.payload().len()) {
@@ -209,32 +244,41 @@ impl LoopState {
                 };
                 self.counters.windows_closed += 1;
                 self.jobs_in_flight += 1;
-                if slot.put(job).is_some() {
+                let skipped = slot.put(job).is_some();
+                if skipped {
                     self.counters.windows_skipped_busy += 1;
                     self.jobs_in_flight -= 1;
+                }
+                if let Some(metrics) = &self.metrics {
+                    metrics.record_window(skipped);
                 }
             }
             if header.is_end_of_stream() {
                 self.end_seen = true;
             }
         }
-        Ok(())
+        Ok(batches)
     }
 
     fn note_batch(&mut self, header: &BatchHeader, assembler: &mut WindowAssembler) {
         self.counters.batches_received += 1;
         self.counters.events_received += header.event_count;
+        if let Some(metrics) = &self.metrics {
+            metrics.record_events(header.event_count);
+        }
         let sensor = header.sensor();
         let new_stream = self.current_stream != Some((header.stream_id, sensor));
-        if new_stream || header.is_restart() {
-            if new_stream {
-                self.counters.streams_started += 1;
-                info!(stream_id = header.stream_id, %sensor, "new event stream");
-            }
+        if new_stream {
+            self.counters.streams_started += 1;
+            info!(stream_id = header.stream_id, %sensor, "new event stream");
             assembler.reset();
             self.stream_epoch += 1;
             self.end_seen = false;
             self.current_stream = Some((header.stream_id, sensor));
+        } else if header.is_restart() {
+            // Event time goes on across a loop, so the windows do too (a recording shorter
+            // than a window still closes them); the scene does not, so the state starts over.
+            self.stream_epoch += 1;
         } else if header.has_gap() || header.first_event_index > self.next_event_index {
             self.counters.gaps_detected += 1;
             warn!(
@@ -248,24 +292,32 @@ impl LoopState {
         self.next_event_index = header.end_event_index();
     }
 
-    /// Publishes every finished forecast; `Ok(false)` when the worker has gone away.
+    /// Publishes every finished forecast.
     fn publish_results(
         &mut self,
         results: &Receiver<Result<ForecastReady, WorkerError>>,
         forecasts: &SlicePublisher<u64, ForecastHeader>,
-    ) -> anyhow::Result<bool> {
+    ) -> Result<Published, InferError> {
+        let mut published = Published::Nothing;
         loop {
             let ready = match results.try_recv() {
-                Ok(result) => result.context("inference failed")?,
-                Err(TryRecvError::Empty) => return Ok(true),
-                Err(TryRecvError::Disconnected) => return Ok(self.jobs_in_flight == 0),
+                Ok(result) => result?,
+                Err(TryRecvError::Empty) => return Ok(published),
+                Err(TryRecvError::Disconnected) if self.jobs_in_flight == 0 => {
+                    return Ok(published)
+                }
+                Err(TryRecvError::Disconnected) => return Ok(Published::WorkerStopped),
             };
+            published = Published::Forecasts;
             self.jobs_in_flight = self.jobs_in_flight.saturating_sub(1);
             let header = self.header_for(&ready);
             let delivery = forecasts.publish_with(header, ready.mask_words.len(), |words| {
                 words.copy_from_slice(&ready.mask_words)
             })?;
             self.counters.record_forecast(&ready, delivery.recipients);
+            if let Some(metrics) = &self.metrics {
+                metrics.record_forecast(&ready);
+            }
             self.forecast_sequence += 1;
         }
     }
@@ -286,7 +338,7 @@ impl LoopState {
             width: ready.sensor.width,
             height: ready.sensor.height,
             horizon_count: self.horizons_us.len() as u32,
-            words_per_mask: words_for(ready.sensor) as u32,
+            words_per_mask: words_for(ready.sensor.pixels()) as u32,
             reserved: 0,
         }
     }
@@ -315,11 +367,13 @@ fn describe(mode: WindowMode) -> String {
     }
 }
 
-fn write_json(path: Option<&Path>, report: &InferReport) -> anyhow::Result<()> {
+fn write_json(path: Option<&Path>, report: &InferReport) -> Result<(), InferError> {
     let Some(path) = path else {
         return Ok(());
     };
-    let json = serde_json::to_string_pretty(report)?;
-    std::fs::write(path, json + "\n")
-        .with_context(|| format!("cannot write the stats to {}", path.display()))
+    let json = serde_json::to_string_pretty(report).expect("the report serialises");
+    std::fs::write(path, json + "\n").map_err(|source| InferError::StatsJson {
+        path: path.to_owned(),
+        source,
+    })
 }

@@ -63,6 +63,10 @@ pub struct RunDescription {
     /// The run on a zero window before subscribing, which pays ONNX Runtime's lazy set-up.
     pub warm_up_ms: f64,
     pub threads: usize,
+    /// The mask threshold in use: --threshold-logit, else the model's.
+    pub threshold_logit: f32,
+    /// Side of the square of sensor pixels one network input cell bins.
+    pub downsample: u16,
     pub horizons_ms: Vec<f32>,
     pub windowing: String,
 }
@@ -89,6 +93,8 @@ pub struct InferReport {
     pub state_bound: bool,
     pub warm_up_ms: f64,
     pub threads: usize,
+    pub threshold_logit: f32,
+    pub downsample: u16,
     pub horizons_ms: Vec<f32>,
     pub windowing: String,
     pub elapsed_s: f64,
@@ -132,6 +138,8 @@ impl InferReport {
             state_bound: description.state_bound,
             warm_up_ms: description.warm_up_ms,
             threads: description.threads,
+            threshold_logit: description.threshold_logit,
+            downsample: description.downsample,
             horizons_ms: description.horizons_ms.clone(),
             windowing: description.windowing.clone(),
             elapsed_s,

@@ -5,8 +5,8 @@ use std::sync::mpsc::Sender;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use evgate_core::{words_for, BitMask, MaskError, SensorSize, VoxelError, VoxelGrid};
-use evgate_model::{ModelError, ModelRuntime};
+use evgate_core::SensorSize;
+use evgate_model::{ForecastError, Forecaster, ModelError};
 
 use crate::latest_slot::LatestSlot;
 use crate::windowing::ClosedWindow;
@@ -15,26 +15,8 @@ use crate::windowing::ClosedWindow;
 pub enum WorkerError {
     #[error(transparent)]
     Model(#[from] ModelError),
-    #[error("cannot build the voxel grid of a {sensor} stream: {source}")]
-    Voxel {
-        sensor: SensorSize,
-        source: VoxelError,
-    },
-    #[error("cannot threshold the logits into a {sensor} mask: {source}")]
-    Mask {
-        sensor: SensorSize,
-        source: MaskError,
-    },
-    #[error(
-        "the stream's sensor {sensor} pads to {padded}, but model {model} was exported for a \
-         {input} input; use a model exported for this sensor size"
-    )]
-    SensorMismatch {
-        sensor: SensorSize,
-        padded: SensorSize,
-        input: SensorSize,
-        model: String,
-    },
+    #[error(transparent)]
+    Forecast(#[from] ForecastError),
 }
 
 /// A window to forecast from.
@@ -56,7 +38,7 @@ pub struct ForecastReady {
     pub reference_time_us: i64,
     pub window_start_us: i64,
     pub closed_at: Instant,
-    /// `1 + K` masks of `words_for(sensor)` words: current, then one per horizon.
+    /// `1 + K` masks of `words_for(sensor.pixels())` words: current, then one per horizon.
     pub mask_words: Vec<u64>,
     pub events_in_window: usize,
     /// Pixels set in the current mask.
@@ -74,22 +56,16 @@ impl ForecastReady {
 }
 
 pub struct Worker {
-    runtime: ModelRuntime,
+    forecaster: Forecaster,
     horizons_ms: Vec<f32>,
-    threshold_logit: f32,
-    grid: Option<VoxelGrid>,
-    mask: Option<BitMask>,
     stream_epoch: Option<u64>,
 }
 
 impl Worker {
-    pub fn new(runtime: ModelRuntime, horizons_ms: Vec<f32>, threshold_logit: f32) -> Self {
+    pub fn new(forecaster: Forecaster, horizons_ms: Vec<f32>) -> Self {
         Self {
-            runtime,
+            forecaster,
             horizons_ms,
-            threshold_logit,
-            grid: None,
-            mask: None,
             stream_epoch: None,
         }
     }
@@ -113,41 +89,21 @@ impl Worker {
     pub fn forecast(&mut self, job: WindowJob) -> Result<ForecastReady, WorkerError> {
         if self.stream_epoch != Some(job.stream_epoch) {
             if self.stream_epoch.is_some() {
-                self.runtime.reset_state()?;
+                self.forecaster.reset_state()?;
             }
             self.stream_epoch = Some(job.stream_epoch);
         }
-        let started = Instant::now();
-        let grid = grid_for(&mut self.grid, &self.runtime, job.sensor)?;
-        grid.clear();
-        grid.accumulate(&job.window.events, job.window.span);
-        grid.normalise();
-        let voxelisation = started.elapsed();
-
-        let output = self.runtime.forecast(grid.as_slice(), &self.horizons_ms)?;
-        let inference = output.inference_time();
-
-        let started = Instant::now();
-        let row_stride = output.width();
-        let threshold = self.threshold_logit;
-        let mask = mask_for(&mut self.mask, job.sensor)?;
-        let words = words_for(job.sensor);
-        let mut mask_words = Vec::with_capacity((1 + output.horizon_count()) * words);
-        let mask_error = |source| WorkerError::Mask {
-            sensor: job.sensor,
-            source,
-        };
-        mask.fill_from_logits(output.mask_logits(), row_stride, threshold)
-            .map_err(mask_error)?;
-        let current_mask_pixels = mask.count_ones();
-        mask_words.extend_from_slice(mask.as_words());
-        for logits in output.future_mask_logits() {
-            mask.fill_from_logits(logits, row_stride, threshold)
-                .map_err(mask_error)?;
+        let forecast = self.forecaster.forecast(
+            job.sensor,
+            &job.window.events,
+            job.window.span,
+            &self.horizons_ms,
+        )?;
+        let mut mask_words =
+            Vec::with_capacity((1 + forecast.futures.len()) * forecast.current.as_words().len());
+        for mask in std::iter::once(forecast.current).chain(forecast.futures) {
             mask_words.extend_from_slice(mask.as_words());
         }
-        let thresholding = started.elapsed();
-
         Ok(ForecastReady {
             stream_id: job.stream_id,
             sensor: job.sensor,
@@ -156,47 +112,10 @@ impl Worker {
             closed_at: job.closed_at,
             mask_words,
             events_in_window: job.window.events.len(),
-            current_mask_pixels,
-            voxelisation,
-            inference,
-            thresholding,
+            current_mask_pixels: forecast.current.count_ones(),
+            voxelisation: forecast.voxelisation,
+            inference: forecast.inference,
+            thresholding: forecast.thresholding,
         })
     }
-}
-
-/// The reusable grid for `sensor`, rebuilt when the sensor changes; the padded sensor must be
-/// the model's input size.
-fn grid_for<'a>(
-    cached: &'a mut Option<VoxelGrid>,
-    runtime: &ModelRuntime,
-    sensor: SensorSize,
-) -> Result<&'a mut VoxelGrid, WorkerError> {
-    let grid = match cached.take() {
-        Some(grid) if grid.sensor() == sensor => grid,
-        _ => {
-            let bins = runtime.metadata().bins as usize;
-            let grid = VoxelGrid::new(sensor, bins)
-                .map_err(|source| WorkerError::Voxel { sensor, source })?;
-            let input = runtime.input_size();
-            if grid.padded() != input {
-                return Err(WorkerError::SensorMismatch {
-                    sensor,
-                    padded: grid.padded(),
-                    input,
-                    model: runtime.model_path().display().to_string(),
-                });
-            }
-            grid
-        }
-    };
-    Ok(cached.insert(grid))
-}
-
-/// The reusable mask for `sensor`, rebuilt when the sensor changes.
-fn mask_for(cached: &mut Option<BitMask>, sensor: SensorSize) -> Result<&mut BitMask, WorkerError> {
-    let mask = match cached.take() {
-        Some(mask) if mask.size() == sensor => mask,
-        _ => BitMask::new(sensor).map_err(|source| WorkerError::Mask { sensor, source })?,
-    };
-    Ok(cached.insert(mask))
 }

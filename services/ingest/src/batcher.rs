@@ -12,6 +12,9 @@ pub enum BatchSize {
     Duration { micros: i64 },
     /// `n` events per batch (the last may be shorter).
     Count { events: usize },
+    /// Whatever each chunk of the source brings, at once: a live stream's packets as they
+    /// arrive.
+    Arrival,
 }
 
 /// One batch ready to publish.
@@ -80,6 +83,10 @@ impl Batcher {
                 let last_t = self.pending_events[self.consumed + count - 1].t;
                 (count, first_t, last_t.saturating_add(1))
             }
+            BatchSize::Arrival => {
+                let last_t = self.pending_events[self.pending_events.len() - 1].t;
+                (available, first_t, last_t.saturating_add(1))
+            }
             BatchSize::Duration { micros } => {
                 let grid_begin = *self.next_begin_us.get_or_insert(first_t);
                 // Skip empty spans so the batch starts at the span holding the next event.
@@ -117,6 +124,7 @@ impl Batcher {
         }
         match self.size {
             BatchSize::Count { events } => available >= events,
+            BatchSize::Arrival => true,
             BatchSize::Duration { micros } => {
                 let first_t = self.pending_events[self.consumed].t;
                 let grid_begin = self.next_begin_us.unwrap_or(first_t);
@@ -220,6 +228,26 @@ mod tests {
         assert_eq!(batches.len(), 3);
         assert!(batches[2].3);
         assert_eq!((batches[0].1, batches[0].2), (1, 3));
+    }
+
+    #[test]
+    fn arrival_batches_are_the_chunks_as_they_come() {
+        let batches = collect(
+            BatchSize::Arrival,
+            vec![vec![5, 7], vec![7, 20, 21], vec![40]],
+        );
+        let spans: Vec<(Vec<i64>, i64, i64)> = batches
+            .iter()
+            .map(|(times, begin, end, _)| (times.clone(), *begin, *end))
+            .collect();
+        assert_eq!(
+            spans,
+            vec![
+                (vec![5, 7], 5, 8),
+                (vec![7, 20, 21], 7, 22),
+                (vec![40], 40, 41)
+            ]
+        );
     }
 
     /// Issue 15: spans ending past i64::MAX wrapped, so no event fitted and `evgate-ingest`

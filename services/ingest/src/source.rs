@@ -21,6 +21,19 @@ pub enum SourceError {
     UnknownSensor { path: PathBuf },
     #[error(transparent)]
     Decode(#[from] evgate_io::DecodeError),
+    #[error(transparent)]
+    Network(#[from] evgate_io::network::NetworkError),
+    #[error(
+        "{endpoint} came back with a {after} sensor after serving a {before} one; a new camera \
+         needs a new ingest"
+    )]
+    SensorChanged {
+        endpoint: String,
+        before: SensorSize,
+        after: SensorSize,
+    },
+    #[error("--loop replays files; {endpoint} is a live network stream")]
+    LoopNetwork { endpoint: String },
 }
 
 /// A chunk appended by [`EventSource::next_chunk`].

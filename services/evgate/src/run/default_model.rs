@@ -1,16 +1,21 @@
-//! The shipped export `evgate run` uses when no `--model` is given: the one whose input size the
-//! source's sensor pads to, so that the simulated driving camera and 640×480 recordings run
-//! with the bundled network as the 346×260 presets do.
+//! The shipped export `evgate run` uses when no `--model` is given: the smallest one whose input
+//! holds the source's padded sensor, so that 320×240, 346×260 and 640×480 cameras all run with
+//! the bundled network (a smaller sensor is zero-padded into the input, as the contract pads).
+//! A sensor larger than every export is binned N×N with the smallest N that fits the smallest
+//! export, the one that runs in real time on 2 cores (1280×720: N = 4, 320×180 on the 352×272
+//! input), unless `--downsample` fixes N.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use evgate_core::SensorSize;
+use evgate_io::network::{Endpoint, NetworkError};
 use evgate_io::reader::UNBOUNDED_SENSOR;
 use evgate_io::LabelledSequence;
 use evgate_model::trusted_path::{self, Search};
 
-/// The shipped exports of one set of weights, by the padded input size each takes.
+/// The shipped exports of one set of weights, by the padded input size each takes, smallest
+/// first.
 const SHIPPED: [(&str, SensorSize); 2] = [
     ("evgate-S.onnx", SensorSize::new(352, 272)),
     ("evgate-S-640x480.onnx", SensorSize::new(640, 480)),
@@ -28,6 +33,12 @@ pub fn source_sensor(
         (Some(path), None) if LabelledSequence::is_labelled_sequence(path) => {
             LabelledSequence::read_sensor_size(path)?
         }
+        // A live stream's header gives its size: read it on a connection of its own.
+        (Some(path), None) if network_endpoint(path).is_some() => {
+            let endpoint = network_endpoint(path).expect("checked above")?;
+            let connection = endpoint.connect(None)?;
+            endpoint.decoder(connection, None)?.sensor_size()
+        }
         (Some(path), None) => evgate_io::open(path)
             .with_context(|| format!("cannot open --input {}", path.display()))?
             .sensor_size(),
@@ -42,20 +53,64 @@ pub fn source_sensor(
     Ok(sensor)
 }
 
-/// The shipped model for `sensor`, looked for as `models/<file>` in each of `search_from` and
-/// their ancestors (the executable's directory, so that a build anywhere in the checkout finds
-/// the checkout's models); like the runtime library, only where no other user could have put it.
-pub fn shipped_model_for(sensor: SensorSize, search_from: &[PathBuf]) -> anyhow::Result<PathBuf> {
-    let padded = sensor.padded_to(16);
-    let Some((file, _)) = SHIPPED.iter().find(|(_, input)| Some(*input) == padded) else {
+/// Binning beyond this loses objects smaller than the cell; a larger sensor needs its own export.
+const MAX_AUTOMATIC_DOWNSAMPLE: u16 = 8;
+
+/// The export inference runs and the binning the sensor needs to fit it.
+#[derive(Debug, PartialEq, Eq)]
+pub struct ModelChoice {
+    pub path: PathBuf,
+    pub downsample: u16,
+}
+
+/// The AEDAT 4 network endpoint `input` names, if it names one rather than a file.
+fn network_endpoint(input: &Path) -> Option<Result<Endpoint, NetworkError>> {
+    Endpoint::parse(input.to_str()?)
+}
+
+/// The shipped model for `sensor` binned `downsample`×`downsample` (by default, unbinned where
+/// an export holds the sensor, else the smallest binning up to 8×8 that fits the smallest:
+/// S at 640×480 takes longer than the 50 ms stride on 2 cores, at 352×272 it keeps up;
+/// BENCHMARKS.md, "Inference"),
+/// looked for as `models/<file>` in each of `search_from` and their ancestors (the executable's
+/// directory, so that a build anywhere in the checkout finds the checkout's models); like the
+/// runtime library, only where no other user could have put it.
+pub fn shipped_model_for(
+    sensor: SensorSize,
+    downsample: Option<u16>,
+    search_from: &[PathBuf],
+) -> anyhow::Result<ModelChoice> {
+    let export_for = |factor: u16| {
+        let padded = sensor.binned(factor).padded_to(16)?;
+        SHIPPED
+            .iter()
+            .find(|(_, input)| padded.width <= input.width && padded.height <= input.height)
+    };
+    let chosen = match downsample {
+        Some(factor) => export_for(factor).map(|(file, _)| (*file, factor)),
+        None => export_for(1).map(|(file, _)| (*file, 1)).or_else(|| {
+            let (smallest, input) = SHIPPED[0];
+            (2..=MAX_AUTOMATIC_DOWNSAMPLE).find_map(|factor| {
+                let padded = sensor.binned(factor).padded_to(16)?;
+                (padded.width <= input.width && padded.height <= input.height)
+                    .then_some((smallest, factor))
+            })
+        }),
+    };
+    let padded = sensor.binned(downsample.unwrap_or(1)).padded_to(16);
+    let Some((file, downsample)) = chosen else {
         let shipped: Vec<String> = SHIPPED
             .iter()
             .map(|(file, input)| format!("models/{file} ({input})"))
             .collect();
+        let binning = match downsample {
+            Some(factor) => format!("binned {factor}x{factor}"),
+            None => format!("even binned {MAX_AUTOMATIC_DOWNSAMPLE}x{MAX_AUTOMATIC_DOWNSAMPLE}"),
+        };
         bail!(
-            "no shipped model takes a {sensor} sensor{}; the shipped ones take {}. Export one \
-             for this size (models/training: python -m evgate_train.export --height H --width \
-             W) and pass --model",
+            "no shipped model takes a {sensor} sensor{}, {binning}; the shipped ones take {}. \
+             Pass a larger --downsample, or export a model for this size (models/training: \
+             python -m evgate_train.export --height H --width W) and pass --model",
             padded.map_or(String::new(), |padded| format!(" (padded to {padded})")),
             shipped.join(", ")
         );
@@ -68,7 +123,7 @@ pub fn shipped_model_for(sensor: SensorSize, search_from: &[PathBuf]) -> anyhow:
                 relative.display()
             )
         })? {
-        Search::Found(path) => Ok(path),
+        Search::Found(path) => Ok(ModelChoice { path, downsample }),
         Search::Missing(looked_at) => bail!(
             "the shipped model models/{file} for a {sensor} sensor is missing (looked at {}); \
              pass --model",
@@ -89,35 +144,57 @@ mod tests {
         PathBuf::from(env!("CARGO_MANIFEST_DIR"))
     }
 
+    /// The file and binning chosen for a sensor and `--downsample`.
+    fn choice(width: u16, height: u16, downsample: Option<u16>) -> (String, u16) {
+        let shipped =
+            shipped_model_for(SensorSize::new(width, height), downsample, &[workspace()]).unwrap();
+        let file = shipped.path.file_name().unwrap().to_string_lossy();
+        (file.into_owned(), shipped.downsample)
+    }
+
     #[test]
-    fn each_sensor_gets_the_export_it_pads_to() {
-        let for_size = |width, height| {
-            shipped_model_for(SensorSize::new(width, height), &[workspace()])
-                .unwrap()
-                .file_name()
-                .unwrap()
-                .to_string_lossy()
-                .into_owned()
-        };
-        assert_eq!(for_size(346, 260), "evgate-S.onnx");
-        assert_eq!(for_size(640, 480), "evgate-S-640x480.onnx");
-        let message = shipped_model_for(SensorSize::new(1280, 720), &[workspace()])
+    fn each_sensor_gets_the_smallest_export_that_holds_it() {
+        let small = ("evgate-S.onnx".to_owned(), 1);
+        let large = ("evgate-S-640x480.onnx".to_owned(), 1);
+        assert_eq!(choice(346, 260, None), small);
+        assert_eq!(choice(320, 240, None), small);
+        assert_eq!(choice(352, 260, None), small);
+        assert_eq!(choice(353, 260, None), large);
+        assert_eq!(choice(640, 480, None), large);
+    }
+
+    #[test]
+    fn a_sensor_larger_than_every_export_is_binned_until_it_fits() {
+        assert_eq!(choice(1280, 720, None), ("evgate-S.onnx".to_owned(), 4));
+        assert_eq!(choice(2048, 1536, None), ("evgate-S.onnx".to_owned(), 6));
+        assert_eq!(
+            choice(1280, 720, Some(2)),
+            ("evgate-S-640x480.onnx".to_owned(), 2)
+        );
+        assert_eq!(choice(640, 480, Some(2)), ("evgate-S.onnx".to_owned(), 2));
+        let message = shipped_model_for(SensorSize::new(4096, 3072), None, &[workspace()])
             .unwrap_err()
             .to_string();
         assert!(
-            message.contains("1280x720")
+            message.contains("4096x3072")
+                && message.contains("binned 8x8")
                 && message.contains("352x272")
                 && message.contains("640x480"),
             "{message}"
         );
+        let message = shipped_model_for(SensorSize::new(1280, 720), Some(1), &[workspace()])
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("binned 1x1"), "{message}");
     }
 
     #[test]
     fn a_missing_model_names_where_it_was_looked_for() {
         let empty = tempfile::tempdir().unwrap();
-        let message = shipped_model_for(SensorSize::new(346, 260), &[empty.path().to_owned()])
-            .unwrap_err()
-            .to_string();
+        let message =
+            shipped_model_for(SensorSize::new(346, 260), None, &[empty.path().to_owned()])
+                .unwrap_err()
+                .to_string();
         assert!(
             message.contains(
                 &empty

@@ -1,18 +1,10 @@
 //! Per-event scores of the gate against the simulator's labels: the keep bitmap of each batch
 //! joined with the label slice of the same batch.
 
+use evgate_core::GateMode;
 use std::collections::HashMap;
 
 use serde::Serialize;
-
-/// Which events the gate should keep: the positive class of the scores.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Wanted {
-    /// Events of independently moving objects (label > 0).
-    MovingObjects,
-    /// Ego-motion events (label = 0).
-    EgoMotion,
-}
 
 /// Confusion counts of "kept" against "wanted", and their scores.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -50,7 +42,9 @@ impl Scores {
 
 /// Joins labels and keep bitmaps by batch sequence number.
 pub struct Scorer {
-    wanted: Wanted,
+    /// The events the gate should keep: the positive class of the scores (label > 0 for
+    /// moving objects, label = 0 for ego-motion).
+    wanted: GateMode,
     stream_id: Option<u64>,
     labels: HashMap<u64, Vec<u16>>,
     bitmaps: HashMap<u64, Vec<u64>>,
@@ -58,7 +52,7 @@ pub struct Scorer {
 }
 
 impl Scorer {
-    pub fn new(wanted: Wanted) -> Self {
+    pub fn new(wanted: GateMode) -> Self {
         Self {
             wanted,
             stream_id: None,
@@ -104,8 +98,8 @@ impl Scorer {
             };
             let kept = word >> (index % 64) & 1 == 1;
             let wanted = match self.wanted {
-                Wanted::MovingObjects => label > 0,
-                Wanted::EgoMotion => label == 0,
+                GateMode::KeepMovingObjects => label > 0,
+                GateMode::KeepEgoMotion => label == 0,
             };
             let counts = &mut self.counts;
             counts.events_scored += 1;
@@ -129,7 +123,7 @@ mod tests {
 
     #[test]
     fn joins_halves_in_either_order_and_scores_them() {
-        let mut scorer = Scorer::new(Wanted::MovingObjects);
+        let mut scorer = Scorer::new(GateMode::KeepMovingObjects);
         // Batch 0: labels first. Events: object, object, background, background; kept 1 and 3.
         scorer.add_labels(9, 0, &[1, 2, 0, 0]);
         scorer.add_bitmap(9, 0, &[0b1010]);

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The CPU training campaign of S on suite v5, resumable across machines: it continues
+# models/campaign/<RUN>/checkpoint.pt (committed with its log.jsonl and val.jsonl) where the last
+# machine stopped, regenerating the suite's train and val splits first where they are missing
+# (bit-identical from the simulator's seeds). A run without a checkpoint yet starts from the
+# weights of INIT_FROM.
+#
+#   bash models/training/campaign.sh            # from the repository root; low priority
+#
+# Environment: RUN (S-v5b), INIT_FROM (../campaign/S-v5/checkpoint.pt, relative to
+# models/training: S trained on the draft of v5 without silhouettes, turning paths, occluders or
+# jitter; empty: random weights), STEPS (4000: the schedule's length), STOP_AT (0: run to
+# STEPS), THREADS (1). Extra arguments go to evgate_train.train.
+set -euo pipefail
+
+root=$(cd "$(dirname "$0")/../.." && pwd)
+run=${RUN:-S-v5b}
+init_from=${INIT_FROM-../campaign/S-v5/checkpoint.pt}
+evgate=$root/target/release/evgate
+if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
+    "$evgate" sim suite --out "$root/data/suite-v5-full" --scale full --splits train
+fi
+if [[ ! -d $root/data/suite-v5/val ]]; then
+    "$evgate" sim suite --out "$root/data/suite-v5" --scale small --splits val
+fi
+cd "$root/models/training"
+# Paths stay relative to models/training: the data cursor in the checkpoint names them.
+exec nice -n 19 .venv/bin/python -m evgate_train.train \
+    --data ../../data/suite-v5-full/train --manifest ../../data/suite-v5-full/manifest.json \
+    --run-dir "../campaign/$run" --size S --steps "${STEPS:-4000}" --stop-at-step "${STOP_AT:-0}" \
+    --threads "${THREADS:-1}" --val-data ../../data/suite-v5/val --val-every 500 \
+    --checkpoint-every 100 --resume ${init_from:+--init-from "$init_from"} "$@"

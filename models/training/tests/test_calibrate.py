@@ -1,0 +1,48 @@
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from evgate_train.calibrate import CalibrationError, f1_curve, main, mask_index
+from evgate_train.export import export
+from evgate_train.network import NetworkConfig, SuppressionNetwork
+from evgate_train.onnx_network import load_export
+
+
+def test_events_take_the_mask_of_the_gates_interval_rule():
+    # evgate-core's documented example: horizons 10, 20, 40 µs-ms alike; mask 2 starts at 15
+    # and mask 3 at 30 (midpoints rounded up).
+    d_us = np.array([0, 14_999, 15_000, 29_999, 30_000, 60_000])
+    assert mask_index(d_us, (10, 20, 40)).tolist() == [0, 0, 1, 1, 2, 2]
+
+
+def test_the_curve_counts_kept_events_above_each_threshold():
+    logits = np.array([-2.0, -1.0, 0.5, 1.0, 3.0])
+    positives = np.array([False, True, False, True, True])
+    rows = {row["threshold-logit"]: row for row in f1_curve(logits, positives, np.array([-3.0, 0.0, 0.75, 5.0]))}
+    assert rows[-3.0]["kept"] == 5 and rows[-3.0]["recall"] == 1.0 and rows[-3.0]["precision"] == 0.6
+    assert rows[0.0]["kept"] == 3 and rows[0.0]["precision"] == pytest.approx(2 / 3)
+    assert rows[0.75]["precision"] == 1.0 and rows[0.75]["recall"] == pytest.approx(2 / 3)
+    assert rows[0.75]["f1"] == pytest.approx(0.8)
+    assert rows[5.0] == {"threshold-logit": 5.0, "precision": 0.0, "recall": 0.0, "f1": 0.0, "kept": 0}
+
+
+def test_calibration_reports_the_best_threshold_of_an_export(synthetic_dir, tmp_path):
+    torch.manual_seed(3)
+    exported = tmp_path / "xs.onnx"
+    export(SuppressionNetwork(NetworkConfig(size="XS")).eval(), exported, 48, 96, "cd" * 32, 1, threshold_logit=0.25)
+    assert load_export(exported, 1).network.metadata["evgate.threshold-logit"] == "0.25"
+    report_path = tmp_path / "calibration.json"
+    main(["--model", str(exported), "--data", str(synthetic_dir), "--output", str(report_path)])
+    report = json.loads(report_path.read_text())
+    # The synthetic scene's events all come from its moving square: keeping every event is best.
+    assert report["events"] > 0 and report["moving-object-events"] == report["events"]
+    assert report["best"]["f1"] == max(row["f1"] for row in report["curve"]) == 1.0
+    assert report["best"]["threshold-logit"] == -6.0
+    assert report["best"]["f1"] >= report["at-zero"]["f1"]
+
+
+def test_calibration_needs_labelled_events(tmp_path):
+    with pytest.raises(CalibrationError, match="no .npz sequences"):
+        main(["--model", "x.onnx", "--data", str(tmp_path), "--output", str(tmp_path / "c.json")])
