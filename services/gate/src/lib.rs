@@ -75,8 +75,9 @@ pub struct Config {
     /// Streams to publish, comma-separated: kept, suppressed, keep-bitmap.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Output::Kept, Output::Suppressed])]
     pub outputs: Vec<Output>,
-    /// What the outputs do when a consumer's buffer is full: drop-and-count (a slow consumer
-    /// never stalls the gate) or block (up to --block-timeout-ms).
+    /// What the outputs (the --serve-kept network stream too) do when a consumer's buffer is
+    /// full: drop-and-count (a slow consumer never stalls the gate) or block (up to
+    /// --block-timeout-ms).
     #[arg(long, value_enum, default_value = "drop-and-count")]
     pub overflow: Overflow,
     /// Longest wait for a full consumer under --overflow block, milliseconds.
@@ -258,7 +259,12 @@ pub fn run(args: &Config) -> Result<GateSummary, RunError> {
                 .metrics
                 .as_ref()
                 .and_then(|m| m.kept_stream_clients.clone());
-            KeptServer::start(endpoint, gauge)
+            KeptServer::start(
+                endpoint,
+                gauge,
+                args.overflow,
+                Duration::from_millis(args.block_timeout_ms),
+            )
         })
         .transpose()?;
     info!(

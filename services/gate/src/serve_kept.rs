@@ -3,9 +3,11 @@
 //! read a camera. A client gets the stream header as soon as the sensor size is known (at once,
 //! or with the first batch), then one packet per gated batch.
 //!
-//! The gate hands each batch's kept events to a thread of its own through a bounded queue and
-//! never waits for the network: when the queue is full the batch is not sent and is counted.
-//! A client that does not take a packet within a second is disconnected.
+//! The gate hands each batch's kept events to a thread of its own through a bounded queue. It
+//! follows the gate's `--overflow`: under drop-and-count it never waits for the network (when
+//! the queue is full the batch is not sent and is counted, and a client that does not take a
+//! packet within a second is disconnected); under block it waits up to `--block-timeout-ms`
+//! for room in the queue, and a client gets that long (at least a second) to take a packet.
 
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -13,15 +15,17 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use crossbeam::channel::{Receiver, Sender, TrySendError};
+use crossbeam::channel::{Receiver, SendTimeoutError, Sender, TrySendError};
 use evgate_core::{Event, SensorSize};
 use evgate_io::aedat4_stream_writer::{push_event_packet, stream_header};
 use evgate_io::network::Endpoint;
+use evgate_ipc::Overflow;
 use prometheus_client::metrics::gauge::Gauge;
 use tracing::{info, warn};
 
 /// Batches that may wait for the network thread.
 const QUEUE_BATCHES: usize = 256;
+/// The least time a client gets to take a packet.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(1);
 const ACCEPT_POLL: Duration = Duration::from_millis(20);
 
@@ -56,18 +60,18 @@ impl Listener {
         Ok(listener)
     }
 
-    /// A waiting client, if any, set up for blocking writes with a timeout.
-    fn accept(&self) -> std::io::Result<Option<Box<dyn Write + Send>>> {
+    /// A waiting client, if any, set up for blocking writes with `write_timeout`.
+    fn accept(&self, write_timeout: Duration) -> std::io::Result<Option<Box<dyn Write + Send>>> {
         let accepted: std::io::Result<Box<dyn Write + Send>> = match self {
             Self::Tcp(listener) => listener.accept().and_then(|(stream, _)| {
                 stream.set_nonblocking(false)?;
-                stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
+                stream.set_write_timeout(Some(write_timeout))?;
                 stream.set_nodelay(true)?;
                 Ok(Box::new(stream) as Box<dyn Write + Send>)
             }),
             Self::Unix(listener) => listener.accept().and_then(|(stream, _)| {
                 stream.set_nonblocking(false)?;
-                stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
+                stream.set_write_timeout(Some(write_timeout))?;
                 Ok(Box::new(stream) as Box<dyn Write + Send>)
             }),
         };
@@ -139,6 +143,8 @@ impl Clients {
 /// The serving side of `--serve-kept`; stops, after sending what was queued, when dropped.
 pub struct KeptServer {
     queue: Option<Sender<Message>>,
+    /// How long `send` waits for room in the queue (`None`: not at all).
+    queue_wait: Option<Duration>,
     threads: Vec<JoinHandle<()>>,
     stop_accepting: Arc<AtomicBool>,
     batches_not_sent: Arc<AtomicU64>,
@@ -148,7 +154,15 @@ pub struct KeptServer {
 
 impl KeptServer {
     /// Listens on `endpoint`; `clients_gauge`, when given, follows the number of clients.
-    pub fn start(endpoint: &str, clients_gauge: Option<Gauge>) -> Result<Self, ServeError> {
+    /// Under `Overflow::Block` a batch waits up to `block_timeout` for the network.
+    pub fn start(
+        endpoint: &str,
+        clients_gauge: Option<Gauge>,
+        overflow: Overflow,
+        block_timeout: Duration,
+    ) -> Result<Self, ServeError> {
+        let queue_wait = (overflow == Overflow::Block).then_some(block_timeout);
+        let write_timeout = queue_wait.map_or(WRITE_TIMEOUT, |wait| wait.max(WRITE_TIMEOUT));
         let endpoint = Endpoint::parse(endpoint).ok_or_else(|| ServeError::NotAnEndpoint {
             endpoint: endpoint.to_owned(),
             problem: "expected tcp://HOST:PORT or unix:///PATH".to_owned(),
@@ -171,7 +185,7 @@ impl KeptServer {
             let endpoint = endpoint.clone();
             std::thread::Builder::new()
                 .name("evgate-serve-accept".to_owned())
-                .spawn(move || accept_clients(&listener, &clients, &stop, &endpoint))
+                .spawn(move || accept_clients(&listener, &clients, &stop, &endpoint, write_timeout))
                 .expect("spawning a thread")
         };
         let sending = std::thread::Builder::new()
@@ -181,6 +195,7 @@ impl KeptServer {
         info!(%endpoint, "serving the kept events as an AEDAT 4 network stream");
         Ok(Self {
             queue: Some(queue),
+            queue_wait,
             threads: vec![accepting, sending],
             stop_accepting,
             batches_not_sent: Arc::new(AtomicU64::new(0)),
@@ -189,10 +204,19 @@ impl KeptServer {
         })
     }
 
-    /// Queues a batch's kept events; a full queue drops the batch and counts it.
+    /// Queues a batch's kept events; a queue still full after the wait the overflow policy
+    /// allows drops the batch and counts it.
     pub fn send(&self, sensor: SensorSize, events: Vec<Event>) {
         let Some(queue) = &self.queue else { return };
-        if let Err(TrySendError::Full(_)) = queue.try_send(Message::Kept { sensor, events }) {
+        let message = Message::Kept { sensor, events };
+        let full = match self.queue_wait {
+            None => matches!(queue.try_send(message), Err(TrySendError::Full(_))),
+            Some(wait) => matches!(
+                queue.send_timeout(message, wait),
+                Err(SendTimeoutError::Timeout(_))
+            ),
+        };
+        if full {
             self.batches_not_sent.fetch_add(1, Ordering::Relaxed);
         }
     }
@@ -232,9 +256,10 @@ fn accept_clients(
     clients: &Mutex<Clients>,
     stop: &AtomicBool,
     endpoint: &Endpoint,
+    write_timeout: Duration,
 ) {
     while !stop.load(Ordering::Relaxed) {
-        match listener.accept() {
+        match listener.accept(write_timeout) {
             Ok(Some(client)) => {
                 let mut clients = lock(clients);
                 clients.connected.push((client, false));
@@ -281,7 +306,13 @@ mod tests {
         let path = directory.path().join("kept.sock");
         let endpoint = format!("unix://{}", path.display());
         let gauge = Gauge::default();
-        let server = KeptServer::start(&endpoint, Some(gauge.clone())).unwrap();
+        let server = KeptServer::start(
+            &endpoint,
+            Some(gauge.clone()),
+            Overflow::DropAndCount,
+            Duration::ZERO,
+        )
+        .unwrap();
         let client = std::os::unix::net::UnixStream::connect(&path).unwrap();
         let deadline = std::time::Instant::now() + Duration::from_secs(30);
         while gauge.get() != 1 {
@@ -314,11 +345,62 @@ mod tests {
     }
 
     #[test]
+    fn under_block_a_client_slower_than_the_write_timeout_loses_nothing() {
+        let directory = tempfile::tempdir().unwrap();
+        let path = directory.path().join("kept.sock");
+        let endpoint = format!("unix://{}", path.display());
+        let gauge = Gauge::default();
+        let server = KeptServer::start(
+            &endpoint,
+            Some(gauge.clone()),
+            Overflow::Block,
+            Duration::from_secs(60),
+        )
+        .unwrap();
+        let client = std::os::unix::net::UnixStream::connect(&path).unwrap();
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        while gauge.get() != 1 {
+            assert!(std::time::Instant::now() < deadline, "never accepted");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let sensor = SensorSize::new(320, 240);
+        let batch: Vec<Event> = (0..1000)
+            .map(|i| Event::new(i, (i % 320) as u16, 7, true))
+            .collect();
+        // More than the queue and the socket buffer hold, so the sender waits on the client,
+        // which takes nothing for longer than the drop-and-count write timeout.
+        let reader = std::thread::spawn(move || {
+            std::thread::sleep(WRITE_TIMEOUT + Duration::from_millis(500));
+            let endpoint = Endpoint::parse(&endpoint).unwrap().unwrap();
+            let mut decoder = endpoint.decoder(Box::new(client), None).unwrap();
+            let (mut events, mut chunk) = (0usize, Vec::new());
+            while decoder.read_chunk(&mut chunk).unwrap() > 0 {
+                events += chunk.len();
+            }
+            events
+        });
+        let batches = QUEUE_BATCHES * 4;
+        for _ in 0..batches {
+            server.send(sensor, batch.clone());
+        }
+        let dropped = server.clients_dropped();
+        assert_eq!(server.batches_not_sent(), 0);
+        drop(server);
+        assert_eq!(dropped.load(Ordering::Relaxed), 0);
+        assert_eq!(reader.join().unwrap(), batches * batch.len());
+    }
+
+    #[test]
     fn a_bad_endpoint_is_refused_naming_it() {
-        let message = KeptServer::start("http://localhost:80", None)
-            .err()
-            .unwrap()
-            .to_string();
+        let message = KeptServer::start(
+            "http://localhost:80",
+            None,
+            Overflow::DropAndCount,
+            Duration::ZERO,
+        )
+        .err()
+        .unwrap()
+        .to_string();
         assert!(message.contains("http://localhost:80") && message.contains("tcp://"));
     }
 }

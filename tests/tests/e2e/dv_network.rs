@@ -247,9 +247,12 @@ fn dv_processing_reads_the_kept_events_the_gate_serves() {
             &format!("tcp://127.0.0.1:{port}"),
             "--metrics-addr",
             &metrics,
-            // This test's own kept subscriber must see every batch too.
+            // This test's own kept subscriber and the network reader must see every batch, on a
+            // loaded machine too.
             "--overflow",
             "block",
+            "--block-timeout-ms",
+            "30000",
             "--exit-at-end-of-stream",
             "--json",
         ],
@@ -295,7 +298,7 @@ fn dv_processing_reads_the_kept_events_the_gate_serves() {
             + u64_at(&gate_summary, "/stats/unjudged-passed-events")
     );
     assert_eq!(u64_at(&gate_summary, "/kept-stream-batches-not-sent"), 0);
-    // A reader stalled for a second (a loaded machine) is disconnected and misses the rest.
+    // Under --overflow block a slow reader delays the stream instead of losing it.
     assert_eq!(u64_at(&gate_summary, "/kept-stream-clients-dropped"), 0);
     assert_eq!(read["ended-by"], "closed");
     assert_eq!(
