@@ -2,6 +2,7 @@
 //! and from the no-forecast policy elsewhere, and the selection of the events of either fate
 //! into any [`EventSink`].
 
+use std::ops::Range;
 use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
@@ -103,6 +104,10 @@ pub struct Judge {
     /// Bit i = event i passes (the keep bitmap the gate publishes).
     pass: Vec<u64>,
     judged: Vec<u64>,
+    /// Bits of one time span of a batch judged by several forecasts, before they are copied
+    /// into place.
+    span_pass: Vec<u64>,
+    span_judged: Vec<u64>,
 }
 
 impl Judge {
@@ -115,28 +120,100 @@ impl Judge {
         mode: GateMode,
         policy: Policy,
     ) -> Verdict {
+        self.judge_by_time(events, forecast.as_slice(), mode, policy)
+    }
+
+    /// Judges `events` (sorted by time) each with the newest of `forecasts` (sorted by
+    /// reference time) whose reference time is at or before it, the events before the second
+    /// forecast with the first: as `evgate eval` judges the events of [t, next t) with the
+    /// forecast of t. With one forecast this is [`Judge::judge`].
+    pub fn judge_by_time(
+        &mut self,
+        events: &[Event],
+        forecasts: &[Forecast<'_>],
+        mode: GateMode,
+        policy: Policy,
+    ) -> Verdict {
         bitset::reset(&mut self.pass, events.len());
         bitset::reset(&mut self.judged, events.len());
         let mut verdict = Verdict::default();
-        let mut unjudged = events.len() as u64;
-        if let Some(forecast) = forecast {
-            let counts = forecast
-                .horizons
-                .keep_bitmap(events, mode, &mut self.pass, &mut self.judged)
-                .expect("bitmaps are sized for the batch");
-            verdict.kept = counts.kept as u64;
-            verdict.suppressed = counts.suppressed as u64;
-            verdict.forecast_used = counts.kept + counts.suppressed > 0;
-            unjudged = counts.unjudged as u64;
-        }
-        if unjudged == 0 {
+        if forecasts.is_empty() {
+            self.apply_policy(events, 0..events.len(), None, mode, policy, &mut verdict);
             return verdict;
         }
+        let mut start = 0;
+        for (index, forecast) in forecasts.iter().enumerate() {
+            let end = match forecasts.get(index + 1) {
+                Some(next) => {
+                    let next_reference = next.horizons.reference_time_us();
+                    start + events[start..].partition_point(|event| event.t < next_reference)
+                }
+                None => events.len(),
+            };
+            if end > start {
+                self.judge_span(events, start..end, forecast, mode, policy, &mut verdict);
+            }
+            start = end;
+        }
+        verdict
+    }
+
+    /// Judges `events[span]` with one forecast, then the events it leaves by the policy.
+    fn judge_span(
+        &mut self,
+        events: &[Event],
+        span: Range<usize>,
+        forecast: &Forecast<'_>,
+        mode: GateMode,
+        policy: Policy,
+        verdict: &mut Verdict,
+    ) {
+        let whole_batch = span.start == 0 && span.end == events.len();
+        let (pass, judged) = if whole_batch {
+            (&mut self.pass, &mut self.judged)
+        } else {
+            bitset::reset(&mut self.span_pass, span.len());
+            bitset::reset(&mut self.span_judged, span.len());
+            (&mut self.span_pass, &mut self.span_judged)
+        };
+        let counts = forecast
+            .horizons
+            .keep_bitmap(&events[span.clone()], mode, pass, judged)
+            .expect("bitmaps are sized for the span");
+        if !whole_batch {
+            for offset in 0..span.len() {
+                if bit(&self.span_pass, offset) {
+                    set_bit(&mut self.pass, span.start + offset);
+                }
+                if bit(&self.span_judged, offset) {
+                    set_bit(&mut self.judged, span.start + offset);
+                }
+            }
+        }
+        verdict.kept += counts.kept as u64;
+        verdict.suppressed += counts.suppressed as u64;
+        verdict.forecast_used |= counts.kept + counts.suppressed > 0;
+        if counts.unjudged > 0 {
+            self.apply_policy(events, span, Some(forecast), mode, policy, verdict);
+        }
+    }
+
+    /// Gives the events of `span` that no forecast judged the policy's fate.
+    fn apply_policy(
+        &mut self,
+        events: &[Event],
+        span: Range<usize>,
+        forecast: Option<&Forecast<'_>>,
+        mode: GateMode,
+        policy: Policy,
+        verdict: &mut Verdict,
+    ) {
         let max_age_us = policy.last_mask_max_age.as_micros() as i64;
-        for (index, event) in events.iter().enumerate() {
+        for index in span {
             if bit(&self.judged, index) {
                 continue;
             }
+            let event = &events[index];
             let passes = match policy.no_forecast {
                 NoForecast::Pass => true,
                 NoForecast::Drop => false,
@@ -151,7 +228,6 @@ impl Judge {
                 verdict.unjudged_dropped += 1;
             }
         }
-        verdict
     }
 
     /// The pass bits of the last judged batch: bit i of word i / 64 for event i.
@@ -302,6 +378,38 @@ mod tests {
             let expected_suppressed: Vec<Event> = (0..events.len()).filter(|&i| !passes(i)).map(|i| events[i]).collect();
             prop_assert_eq!(kept, expected_kept);
             prop_assert_eq!(suppressed, expected_suppressed);
+        }
+
+        #[test]
+        fn judging_by_time_is_judging_each_forecasts_span_alone(
+            raw in proptest::collection::vec((990_000i64..1_120_000, 0u16..10, 0u16..5), 0..600),
+            policy_index in 0usize..3,
+            ego in any::<bool>(),
+        ) {
+            let mut events: Vec<Event> = raw.iter().map(|&(t, x, y)| Event::new(t, x, y, true)).collect();
+            events.sort_by_key(|e| e.t);
+            let (earlier_words, later_words) = (column_masks(), column_masks().iter().map(|w| !w & 0xffff_ffff).collect::<Vec<_>>());
+            let forecasts = [forecast(&earlier_words, 1_000_000), forecast(&later_words, 1_015_000)];
+            let no_forecast = [NoForecast::Pass, NoForecast::Drop, NoForecast::LastMask][policy_index];
+            let mode = if ego { GateMode::KeepEgoMotion } else { GateMode::KeepMovingObjects };
+            let mut judge = Judge::default();
+            let verdict = judge.judge_by_time(&events, &forecasts, mode, policy(no_forecast));
+            let split = events.partition_point(|e| e.t < 1_015_000);
+            let mut alone = Judge::default();
+            let mut expected_passes = Vec::new();
+            let mut expected = Verdict::default();
+            for (span, forecast) in [(&events[..split], forecasts[0]), (&events[split..], forecasts[1])] {
+                let part = alone.judge(span, Some(forecast), mode, policy(no_forecast));
+                expected.kept += part.kept;
+                expected.suppressed += part.suppressed;
+                expected.unjudged_passed += part.unjudged_passed;
+                expected.unjudged_dropped += part.unjudged_dropped;
+                expected.forecast_used |= part.forecast_used;
+                expected_passes.extend((0..span.len()).map(|i| bit(alone.pass_bits(), i)));
+            }
+            prop_assert_eq!(verdict, expected);
+            let passes: Vec<bool> = (0..events.len()).map(|i| bit(judge.pass_bits(), i)).collect();
+            prop_assert_eq!(passes, expected_passes);
         }
     }
 }

@@ -114,7 +114,21 @@ pub struct Evaluation {
     binned: Vec<BinnedAccumulators>,
     event_bins: LogBins,
     started: Instant,
+    /// The first model's verdict on each event of the last sequence, when asked for.
+    keep_record: Option<KeepRecord>,
 }
+
+/// The first model's verdict on each event of one recording, in file order: [`KEPT`],
+/// [`SUPPRESSED`], or [`NOT_GATED`] for an event outside every gated span [t, t + gate-span)
+/// or off the sensor.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct KeepRecord {
+    pub verdicts: Vec<u8>,
+}
+
+pub const SUPPRESSED: u8 = 0;
+pub const KEPT: u8 = 1;
+pub const NOT_GATED: u8 = 2;
 
 impl Evaluation {
     /// `models[0]`, when present, is the model under test: its current mask also feeds the
@@ -165,7 +179,19 @@ impl Evaluation {
             binned,
             event_bins,
             started: Instant::now(),
+            keep_record: None,
         })
+    }
+
+    /// Records the first model's verdict on every event of each sequence from now on; read it
+    /// after each [`Evaluation::evaluate`] with [`Evaluation::keep_record`].
+    pub fn record_verdicts(&mut self) {
+        self.keep_record.get_or_insert_with(KeepRecord::default);
+    }
+
+    /// The first model's verdicts on the events of the last evaluated sequence.
+    pub fn keep_record(&self) -> Option<&KeepRecord> {
+        self.keep_record.as_ref()
     }
 
     pub fn config(&self) -> &EvalConfig {
@@ -237,6 +263,14 @@ impl Evaluation {
         let mut sweep: Vec<(HorizonAccumulator, Mean)> =
             vec![Default::default(); self.sweep_settings.len()];
         let mut previous_current: Option<(i64, Vec<bool>)> = None;
+        if let Some(record) = &mut self.keep_record {
+            record.verdicts.clear();
+            record.verdicts.resize(recording.events.len(), NOT_GATED);
+        }
+        let first_model_method = self
+            .methods
+            .iter()
+            .position(|method| method.kind == MethodKind::Model(0));
         let references = recording.reference_times(&config);
         let gating_horizons: Vec<usize> = (0..horizons_us.len())
             .filter(|&k| horizons_us[k] <= gate_span_us)
@@ -364,6 +398,11 @@ impl Evaluation {
                         size,
                     )
                     .map_err(|error| error.at(name, reference_us))?;
+                    if let (Some(record), true) =
+                        (&mut self.keep_record, Some(index) == first_model_method)
+                    {
+                        gate.record(&mut record.verdicts[gated.first_index..]);
+                    }
                     accumulator.kept.merge(KeptCounts {
                         span_us: gate_span_us,
                         ..gate.kept
@@ -590,20 +629,26 @@ impl Evaluation {
     }
 }
 
-/// Events of [t, t + span) with their labels, when the recording has them.
-fn gated_events(
-    recording: &Recording,
-    reference_us: i64,
-    span_us: i64,
-) -> (&[evgate_core::Event], Option<&[u16]>) {
+/// The events of [t, t + span), where they start in the recording, and their labels when the
+/// recording has them.
+struct GatedSpan<'a> {
+    first_index: usize,
+    events: &'a [evgate_core::Event],
+    labels: Option<&'a [u16]>,
+}
+
+fn gated_events(recording: &Recording, reference_us: i64, span_us: i64) -> GatedSpan<'_> {
     let events = &recording.events;
     let first = events.partition_point(|e| e.t < reference_us);
     let last = events.partition_point(|e| e.t < reference_us + span_us);
-    let labels = recording
-        .event_labels
-        .as_deref()
-        .map(|labels| &labels[first..last]);
-    (&events[first..last], labels)
+    GatedSpan {
+        first_index: first,
+        events: &events[first..last],
+        labels: recording
+            .event_labels
+            .as_deref()
+            .map(|labels| &labels[first..last]),
+    }
 }
 
 /// A gating failure before the sequence and time are known.
@@ -629,28 +674,47 @@ impl GatingError {
     }
 }
 
-/// What gating one span gave: kept counts always, the confusion against labels when known.
+/// What gating one span gave: kept counts always, the confusion against labels when known,
+/// and the keep and judged bits of its events.
 struct GateScores {
     kept: KeptCounts,
     confusion: EventConfusion,
+    keep: Vec<u64>,
+    judged: Vec<u64>,
+}
+
+impl GateScores {
+    /// Writes the span's verdicts into `verdicts` (from the span's first event on).
+    fn record(&self, verdicts: &mut [u8]) {
+        for (index, verdict) in verdicts.iter_mut().enumerate().take(self.judged.len() * 64) {
+            if bit(&self.judged, index) {
+                *verdict = if bit(&self.keep, index) {
+                    KEPT
+                } else {
+                    SUPPRESSED
+                };
+            }
+        }
+    }
 }
 
 /// Gates the events with the forecast masks of the gating horizons (the gate kernel's
 /// horizon intervals), counts what is kept and, with labels, flagged-as-IMO against the truth.
 fn score_events(
-    (events, labels): &(&[evgate_core::Event], Option<&[u16]>),
+    GatedSpan { events, labels, .. }: &GatedSpan<'_>,
     reference_us: i64,
     gating_horizons: &[usize],
     horizons_us: &[i64],
     futures: &[Vec<bool>],
     size: SensorSize,
 ) -> Result<GateScores, GatingError> {
-    let mut scores = GateScores {
-        kept: KeptCounts::default(),
-        confusion: EventConfusion::default(),
-    };
     if events.is_empty() {
-        return Ok(scores);
+        return Ok(GateScores {
+            kept: KeptCounts::default(),
+            confusion: EventConfusion::default(),
+            keep: Vec::new(),
+            judged: Vec::new(),
+        });
     }
     let mut words = Vec::new();
     for &k in gating_horizons {
@@ -672,8 +736,15 @@ fn score_events(
     let (mut keep, mut judged) = (vec![0u64; word_count], vec![0u64; word_count]);
     view.keep_bitmap(events, GateMode::KeepMovingObjects, &mut keep, &mut judged)
         .map_err(GatingError::Gate)?;
-    for i in (0..events.len()).filter(|&i| bit(&judged, i)) {
-        let kept = bit(&keep, i);
+    let mut scores = GateScores {
+        kept: KeptCounts::default(),
+        confusion: EventConfusion::default(),
+        keep,
+        judged,
+    };
+    let (keep, judged) = (&scores.keep, &scores.judged);
+    for i in (0..events.len()).filter(|&i| bit(judged, i)) {
+        let kept = bit(keep, i);
         scores.kept.judged += 1;
         scores.kept.kept += u64::from(kept);
         if let Some(labels) = labels {
@@ -732,7 +803,11 @@ mod tests {
         ];
         let labels = [3, 0, 3, 0, 3, 3];
         let scores = score_events(
-            &(&events[..], Some(&labels[..])),
+            &GatedSpan {
+                first_index: 0,
+                events: &events[..],
+                labels: Some(&labels[..]),
+            },
             t,
             &[0, 1],
             &[0, 10_000],
@@ -757,6 +832,12 @@ mod tests {
                 false_negative: 1,
                 true_negative: 2
             }
+        );
+        let mut verdicts = [NOT_GATED; 6];
+        scores.record(&mut verdicts);
+        assert_eq!(
+            verdicts,
+            [KEPT, SUPPRESSED, SUPPRESSED, SUPPRESSED, KEPT, NOT_GATED]
         );
     }
 

@@ -34,7 +34,7 @@ pub mod summary;
 
 pub use config::{EvalConfig, OmsSweep};
 pub use flops::{FlopTable, FlopTableError};
-pub use harness::{Evaluation, HarnessError, LoadedModel};
+pub use harness::{Evaluation, HarnessError, KeepRecord, LoadedModel, KEPT, NOT_GATED, SUPPRESSED};
 pub use inputs::{read_recording, InputError, InputOptions};
 pub use method::{MethodInfo, MethodKind};
 pub use oms::OmsParameters;

@@ -96,6 +96,12 @@ pub struct EvalArgs {
     /// evidence/models/flops.json, else models/training/runs/flops.json, when present.
     #[arg(long)]
     pub model_flops: Option<PathBuf>,
+    /// Also write the first model's verdict on every event of each recording to
+    /// DIR/<sequence>.npy: one uint8 per event in file order, 1 kept, 0 suppressed, 2 not
+    /// gated (outside every [t, t + gate-span) or off the sensor). `evgate run --lock-step
+    /// --keep-bits` writes the live pipeline's for comparison.
+    #[arg(long, value_name = "DIR")]
+    pub keep_bits: Option<PathBuf>,
     /// Print the overall summary as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -190,6 +196,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         sensor_size: args.sensor,
     };
     let mut evaluation = Evaluation::new(config, models)?;
+    if let Some(directory) = &args.keep_bits {
+        fs::create_dir_all(directory)
+            .with_context(|| format!("--keep-bits {}: cannot create it", directory.display()))?;
+        evaluation.record_verdicts();
+    }
     let bar = ProgressBar::new(0);
     bar.set_style(
         ProgressStyle::with_template(
@@ -223,6 +234,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                  its mask, if it is the first) sit this recording out"
             );
         }
+        let name = result.name.clone();
         tracing::info!(
             sequence = %result.name,
             preset = %result.preset,
@@ -230,6 +242,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             ground_truth = ?result.ground_truth,
             "evaluated"
         );
+        if let (Some(directory), Some(record)) = (&args.keep_bits, evaluation.keep_record()) {
+            let path = directory.join(format!("{}.npy", name.replace('/', "_")));
+            write_verdicts(&path, &record.verdicts)
+                .with_context(|| format!("--keep-bits: cannot write {}", path.display()))?;
+        }
     }
     bar.finish_and_clear();
 
@@ -352,6 +369,14 @@ fn select(paths: Vec<PathBuf>, presets: &[String], max: Option<usize>) -> Vec<Pa
 
 fn percent(value: Option<f64>) -> String {
     value.map_or_else(|| "–".to_owned(), |v| format!("{:.1}", v * 100.0))
+}
+
+/// One uint8 per event as a `.npy` file.
+pub fn write_verdicts(path: &std::path::Path, verdicts: &[u8]) -> anyhow::Result<()> {
+    let mut file = std::io::BufWriter::new(fs::File::create(path)?);
+    evgate_io::npy::NpyArray::from_slice(&[verdicts.len()], verdicts).write(&mut file)?;
+    std::io::Write::flush(&mut file)?;
+    Ok(())
 }
 
 fn print_summary(report: &Report) {

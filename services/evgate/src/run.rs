@@ -103,6 +103,20 @@ pub struct RunArgs {
     /// until --duration or a signal.
     #[arg(long = "loop", requires = "input")]
     loop_input: bool,
+    /// Judge every event by the forecast of the newest window that ended at or before it, with
+    /// every window forecast (evgate-gate --lock-step, evgate-infer --every-window): the
+    /// decisions of `evgate eval` on the same recording, model and horizons, at the price of
+    /// latency (each batch waits for its forecast).
+    #[arg(long, conflicts_with = "no_infer")]
+    lock_step: bool,
+    /// Forecast horizons of the inference service in milliseconds, comma-separated and
+    /// ascending (at most 8); default: the service's.
+    #[arg(long, value_delimiter = ',')]
+    horizons_ms: Vec<f32>,
+    /// Write the gate's verdict on every input event to FILE (.npy, one uint8 per event in
+    /// input order: 1 passed, 0 suppressed), as `evgate eval --keep-bits` does.
+    #[arg(long, value_name = "FILE")]
+    keep_bits: Option<PathBuf>,
     /// Batch span in milliseconds.
     #[arg(long, default_value_t = 1.0)]
     batch_ms: f64,
@@ -126,6 +140,29 @@ pub struct RunArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     json: bool,
+}
+
+/// The gate's verdict on each input event, by its index in the input (`--keep-bits`).
+#[derive(Default)]
+struct Verdicts {
+    passed: Vec<u8>,
+}
+
+impl Verdicts {
+    fn add(&mut self, header: &BatchHeader, bitmap: &[u64]) {
+        let first = header.first_event_index as usize;
+        let end = first + header.event_count as usize;
+        if self.passed.len() < end {
+            self.passed.resize(end, 0);
+        }
+        for (offset, verdict) in self.passed[first..end].iter_mut().enumerate() {
+            *verdict = u8::from(
+                bitmap
+                    .get(offset / 64)
+                    .is_some_and(|word| word >> (offset % 64) & 1 == 1),
+            );
+        }
+    }
 }
 
 /// Rates between two status updates.
@@ -215,6 +252,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     gate.json = true;
     gate.cpu = args.gate_cpu;
     gate.serve_kept = args.serve_kept.clone();
+    gate.lock_step = args.lock_step;
     let gate_args = configs.arguments("evgate-gate", &gate)?;
     let mut services = vec![Service::start(&directory, "evgate-gate", &gate_args)?];
     if let Some(model) = &model {
@@ -227,6 +265,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         infer.exit_at_end = true;
         infer.wait = args.wait;
         infer.cpu = args.infer_cpu;
+        infer.every_window = args.lock_step;
+        infer.horizons_ms = args.horizons_ms.clone();
         let infer_args = configs.arguments("evgate-infer", &infer)?;
         services.push(Service::start(&directory, "evgate-infer", &infer_args)?);
     }
@@ -272,6 +312,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .context("cannot attach the status interval")?;
 
     let mut scorer = Scorer::new(args.mode);
+    let mut verdicts = Verdicts::default();
     let mut saw_labels = false;
     let mut end_of_stream = false;
     let mut latest_stats: Option<PipelineStats> = None;
@@ -312,6 +353,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                     while let Some(sample) = bitmaps.receive()? {
                         let header = sample.user_header();
                         scorer.add_bitmap(header.stream_id, header.sequence, sample.payload());
+                        verdicts.add(header, sample.payload());
                         end_of_stream |= header.is_end_of_stream();
                     }
                 }
@@ -394,6 +436,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     while let Some(sample) = bitmaps.receive()? {
         let header = sample.user_header();
         scorer.add_bitmap(header.stream_id, header.sequence, sample.payload());
+        verdicts.add(header, sample.payload());
+    }
+    if let Some(path) = &args.keep_bits {
+        crate::eval::write_verdicts(path, &verdicts.passed)
+            .with_context(|| format!("--keep-bits: cannot write {}", path.display()))?;
     }
 
     let summary = RunSummary {

@@ -6,6 +6,7 @@
 mod accounting;
 mod error;
 mod forecast_store;
+mod lock_step;
 mod serve_kept;
 mod waiting;
 
@@ -15,7 +16,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use evgate_core::{Event, GateMode, Judge, NoForecast, Policy};
+use evgate_core::{Event, Forecast, GateMode, Judge, NoForecast, Policy};
 use evgate_ipc::metrics::{self, MetricsError, MetricsServer, PipelineCounters};
 use evgate_ipc::stats::NOT_MEASURED;
 use evgate_ipc::{
@@ -32,6 +33,7 @@ use tracing::{info, warn};
 
 use accounting::{Accounting, Admission};
 use forecast_store::StoredForecast;
+use lock_step::LockStep;
 
 /// Output streams the gate can publish.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -89,6 +91,12 @@ pub struct Config {
     /// Period of the stats publication, milliseconds.
     #[arg(long, default_value_t = 100)]
     pub stats_interval_ms: u64,
+    /// Judge every event by the forecast of the newest window that ended at or before it,
+    /// holding each batch (copied) until that forecast is in, as `evgate eval` does: with
+    /// `evgate-infer --every-window` on a replay, the gate then keeps exactly the events the
+    /// evaluation keeps. Without it, a batch is judged at once by the newest forecast.
+    #[arg(long)]
+    pub lock_step: bool,
     /// Exit once the end-of-stream batch has been gated.
     #[arg(long)]
     pub exit_at_end_of_stream: bool,
@@ -176,6 +184,8 @@ struct Gate {
     stats: LatestPublisher<PipelineStats>,
     accounting: Accounting,
     forecast: Option<StoredForecast>,
+    /// Under --lock-step: the held batches and the forecasts that will judge them.
+    lock_step: Option<LockStep>,
     judge: Judge,
     /// Forecast counters survive a change of input stream.
     forecasts_received: u64,
@@ -236,6 +246,7 @@ pub fn run(args: &Config) -> Result<GateSummary, RunError> {
         stats: LatestPublisher::open(&node, &names, Stream::Stats)?,
         accounting: Accounting::default(),
         forecast: None,
+        lock_step: args.lock_step.then(LockStep::default),
         judge: Judge::default(),
         forecasts_received: 0,
         forecasts_rejected: 0,
@@ -279,6 +290,15 @@ pub fn run(args: &Config) -> Result<GateSummary, RunError> {
         WaitStrategy::Event => gate.run_on_events(&node, &events, &forecasts, args)?,
         WaitStrategy::BusyPoll => gate.run_busy_polling(&node, &events, &forecasts, args)?,
     };
+    if gate
+        .lock_step
+        .as_ref()
+        .is_some_and(|held| held.held_batches() > 0)
+    {
+        // Stopped before their forecasts came: judged by those that did.
+        gate.release_held(&node, true)?;
+        gate.publish_stats()?;
+    }
     let stats = gate.accounting.stats;
     let kept_stream_batches_not_sent = gate.kept_server.as_ref().map(KeptServer::batches_not_sent);
     let kept_stream_clients_dropped = gate.kept_server.as_ref().map(KeptServer::clients_dropped);
@@ -305,14 +325,9 @@ enum Drained {
     Signal,
 }
 
-/// The stored forecast when it describes this stream and sensor.
-fn forecast_for<'a>(
-    forecast: Option<&'a StoredForecast>,
-    header: &BatchHeader,
-) -> Option<&'a StoredForecast> {
-    forecast.filter(|forecast| {
-        forecast.header.source_stream_id == header.stream_id && forecast.sensor() == header.sensor()
-    })
+/// Whether the stored forecast describes this batch's stream and sensor.
+fn describes(forecast: &StoredForecast, header: &BatchHeader) -> bool {
+    forecast.header.source_stream_id == header.stream_id && forecast.sensor() == header.sensor()
 }
 
 impl Gate {
@@ -330,7 +345,10 @@ impl Gate {
             match StoredForecast::copy_from(*sample.user_header(), sample.payload()) {
                 Ok(forecast) => {
                     self.latest_model_runtime_us = forecast.header.model_runtime_us as i64;
-                    self.forecast = Some(forecast);
+                    match &mut self.lock_step {
+                        Some(lock_step) => lock_step.add_forecast(forecast),
+                        None => self.forecast = Some(forecast),
+                    }
                 }
                 Err(error) => {
                     self.forecasts_rejected += 1;
@@ -366,13 +384,32 @@ impl Gate {
                 warn!(%error, "batch ignored");
                 continue;
             }
-            reached_end |= self.gate_batch(node, &header, sample.payload())?;
+            match &mut self.lock_step {
+                Some(lock_step) => {
+                    lock_step.hold(header, sample.payload());
+                    drop(sample);
+                    reached_end |= self.release_held(node, false)?;
+                }
+                None => {
+                    let stored = self.forecast.take();
+                    let forecast = stored
+                        .as_ref()
+                        .filter(|forecast| describes(forecast, &header))
+                        .map(StoredForecast::forecast);
+                    let gated =
+                        self.gate_batch(node, &header, sample.payload(), forecast.as_slice());
+                    self.forecast = stored;
+                    reached_end |= gated?;
+                }
+            }
             // Under a sustained flood this loop does not return to the waitset, whose interval
             // would then never fire.
             if self.stats_published_at.elapsed() >= self.stats_interval {
                 self.publish_stats()?;
             }
         }
+        // Forecasts that arrived after the last batch may release held ones.
+        reached_end |= self.release_held(node, false)?;
         let drained = if reached_end {
             Drained::EndOfStream
         } else {
@@ -381,29 +418,58 @@ impl Gate {
         Ok((drained, batches))
     }
 
+    /// Gates the held batches whose forecasts are all in (every held batch when `flush`);
+    /// returns whether the end-of-stream batch was among them. Nothing to do without
+    /// --lock-step.
+    fn release_held(&mut self, node: &evgate_ipc::Node, flush: bool) -> Result<bool, RunError> {
+        let Some(mut lock_step) = self.lock_step.take() else {
+            return Ok(false);
+        };
+        let mut reached_end = Ok(false);
+        while let Some(batch) = lock_step.next_ready(flush) {
+            let forecasts = lock_step.forecasts_for(&batch);
+            let gated = self.gate_batch(node, &batch.header, &batch.events, &forecasts);
+            drop(forecasts);
+            lock_step.judged(&batch);
+            match gated {
+                Ok(end) => reached_end = reached_end.map(|before| before | end),
+                Err(error) => {
+                    reached_end = Err(error);
+                    break;
+                }
+            }
+        }
+        self.lock_step = Some(lock_step);
+        reached_end
+    }
+
+    /// Judges one batch, each event by the newest of `forecasts` (those of its stream and
+    /// sensor, oldest first) at or before it, and publishes the outcome.
     fn gate_batch(
         &mut self,
         node: &evgate_ipc::Node,
         header: &BatchHeader,
         events: &[Event],
+        forecasts: &[Forecast<'_>],
     ) -> Result<bool, RunError> {
         let lost_events = match self.accounting.admit(header) {
             Admission::Accept { lost_events } => lost_events,
             Admission::Duplicate => return Ok(false),
         };
         let kernel_start = Instant::now();
-        let forecast = forecast_for(self.forecast.as_ref(), header);
-        let verdict = self.judge.judge(
-            events,
-            forecast.map(StoredForecast::forecast),
-            self.mode,
-            self.policy,
-        );
+        let verdict = self
+            .judge
+            .judge_by_time(events, forecasts, self.mode, self.policy);
         let kernel_ns = kernel_start.elapsed().as_nanos() as i64;
-        let prediction_age_us = forecast.map_or(NOT_MEASURED, |forecast| {
-            header.t_end_us - forecast.header.reference_time_us
-        });
-        if let (Some(metrics), Some(_)) = (&self.metrics, forecast) {
+        // Measured from the newest forecast at or before the batch's last event.
+        let references = forecasts.iter().map(|f| f.horizons.reference_time_us());
+        let newest_reference = references
+            .clone()
+            .rfind(|&reference| events.last().is_none_or(|last| reference <= last.t))
+            .or_else(|| references.clone().next());
+        let prediction_age_us =
+            newest_reference.map_or(NOT_MEASURED, |reference| header.t_end_us - reference);
+        if let (Some(metrics), Some(_)) = (&self.metrics, newest_reference) {
             metrics
                 .prediction_age
                 .observe(prediction_age_us as f64 * 1e-6);

@@ -51,7 +51,8 @@ impl Gate {
         let on_wakeup = |attachment: WaitSetAttachmentId<evgate_ipc::Service>| {
             let step = if attachment.has_event_from(&forecast_guard) {
                 forecasts.clear_wakeups();
-                self.take_forecasts(forecasts).map(|_| false)
+                self.take_forecasts(forecasts)
+                    .and_then(|_| self.release_held(node, false))
             } else if attachment.has_event_from(&events_guard) {
                 events.clear_wakeups();
                 self.drain_events(node, events, forecasts)

@@ -89,6 +89,11 @@ pub struct Config {
     /// latency as histograms, windows and forecasts as counters.
     #[arg(long)]
     pub metrics_addr: Option<String>,
+    /// Forecast every window in turn instead of only the newest when the model falls behind:
+    /// the forecasts of a replay are then those of `evgate eval`, at the price of a growing
+    /// delay (and queue) while the model is slower than the events.
+    #[arg(long)]
+    pub every_window: bool,
     /// Exit once the event stream has ended and the forecast of its last window is published.
     #[arg(long)]
     pub exit_at_end: bool,

@@ -5,11 +5,11 @@ mod config;
 mod error;
 mod horizons;
 mod latency;
-mod latest_slot;
 mod loop_wait;
 mod metrics;
 mod service;
 mod stats;
+mod window_handover;
 mod windowing;
 mod worker;
 

@@ -1,6 +1,7 @@
 //! The service loop: the main thread owns the shared-memory ports (iceoryx2 ports stay on the
 //! thread that made them), drains the event stream every cycle and publishes finished
-//! forecasts; the inference thread works on the newest closed window.
+//! forecasts; the inference thread works on the newest closed window (on every window in turn
+//! under `--every-window`).
 
 use std::path::Path;
 use std::sync::mpsc::{self, Receiver, TryRecvError};
@@ -18,10 +19,10 @@ use tracing::{error, info, warn};
 use crate::config::Config;
 use crate::error::InferError;
 use crate::horizons::{horizon_us, resolve_horizons};
-use crate::latest_slot::LatestSlot;
 use crate::loop_wait::LoopWait;
 use crate::metrics::InferMetrics;
 use crate::stats::{InferCounters, InferReport, RunDescription};
+use crate::window_handover::WindowHandover;
 use crate::windowing::{ClosedWindow, WindowAssembler, WindowMode};
 use crate::worker::{ForecastReady, WindowJob, Worker, WorkerError};
 
@@ -104,7 +105,7 @@ pub fn run(args: &Config) -> Result<InferReport, InferError> {
         "inference service ready"
     );
 
-    let slot = Arc::new(LatestSlot::<WindowJob>::default());
+    let slot = Arc::new(WindowHandover::<WindowJob>::new(args.every_window));
     let (result_sender, results) = mpsc::channel();
     let worker = {
         let slot = Arc::clone(&slot);
@@ -146,7 +147,8 @@ pub fn run(args: &Config) -> Result<InferReport, InferError> {
             info!("stopping on SIGINT or SIGTERM");
             break Ok(());
         }
-        let worked = match state.receive_batches(&events, &mut assembler, &slot) {
+        let worked = match state.receive_batches(&events, &mut assembler, &slot, args.every_window)
+        {
             Ok(batches) => batches > 0,
             Err(failure) => break Err(failure),
         };
@@ -212,7 +214,8 @@ impl LoopState {
         &mut self,
         events: &SliceSubscriber<Event, BatchHeader>,
         assembler: &mut WindowAssembler,
-        slot: &LatestSlot<WindowJob>,
+        slot: &WindowHandover<WindowJob>,
+        every_window: bool,
     ) -> Result<u32, InferError> {
         events.clear_wakeups();
         let mut batches = 0;
@@ -233,6 +236,9 @@ impl LoopState {
                 &mut self.closed,
             );
             drop(sample);
+            if every_window && header.is_end_of_stream() {
+                assembler.close_at_stream_end(header.t_end_us, &mut self.closed);
+            }
             let closed_at = Instant::now();
             for window in self.closed.drain(..) {
                 let job = WindowJob {

@@ -46,6 +46,8 @@ pub struct WindowAssembler {
     mode: WindowMode,
     buffer: Vec<Event>,
     next_reference_us: Option<i64>,
+    /// End of the window [`WindowAssembler::close_at_stream_end`] closed last.
+    stream_end_us: Option<i64>,
     skipped_silent_windows: u64,
 }
 
@@ -65,6 +67,7 @@ impl WindowAssembler {
             mode,
             buffer: Vec::new(),
             next_reference_us: None,
+            stream_end_us: None,
             skipped_silent_windows: 0,
         })
     }
@@ -73,6 +76,7 @@ impl WindowAssembler {
     pub fn reset(&mut self) {
         self.buffer.clear();
         self.next_reference_us = None;
+        self.stream_end_us = None;
     }
 
     /// Windows passed over because a batch jumped far ahead in event time.
@@ -97,6 +101,45 @@ impl WindowAssembler {
             } => self.close_by_duration(window_us, stride_us, batch_begin_us, batch_end_us, closed),
             WindowMode::EventCount { events } => self.close_by_count(events, closed),
         }
+    }
+
+    /// Closes a last window ending at `end_us`, the stream's end (after its last event), unless
+    /// one already ends there or later. Under `--every-window` the last forecast then lies past
+    /// every event, which tells a lock-step gate that its forecasts are all in.
+    pub fn close_at_stream_end(&mut self, end_us: i64, closed: &mut Vec<ClosedWindow>) {
+        let last_closed_us = closed
+            .last()
+            .map(ClosedWindow::reference_time_us)
+            .max(self.stream_end_us);
+        let start = match self.mode {
+            WindowMode::Duration {
+                window_us,
+                stride_us,
+            } => {
+                let previous = self.next_reference_us.map(|next| next - stride_us);
+                if previous.max(last_closed_us).is_some_and(|t| t >= end_us) {
+                    return;
+                }
+                end_us - window_us
+            }
+            WindowMode::EventCount { .. } => {
+                if last_closed_us.is_some_and(|t| t >= end_us) {
+                    return;
+                }
+                self.buffer.first().map_or(end_us - 1, |e| e.t)
+            }
+        };
+        let span = TimeSpan {
+            start: start.min(end_us - 1),
+            end: end_us,
+        };
+        let first = self.buffer.partition_point(|e| e.t < span.start);
+        let last = self.buffer.partition_point(|e| e.t <= span.end);
+        closed.push(ClosedWindow {
+            span,
+            events: self.buffer[first..last.max(first)].to_vec(),
+        });
+        self.stream_end_us = Some(end_us);
     }
 
     fn close_by_duration(
@@ -181,6 +224,33 @@ mod tests {
             stride_us,
         })
         .unwrap()
+    }
+
+    #[test]
+    fn the_stream_end_closes_a_last_window_past_every_event() {
+        let mut assembler = duration(50, 50);
+        let mut closed = Vec::new();
+        assembler.push(&[event(0), event(60), event(120)], 0, 121, &mut closed);
+        assert_eq!(
+            closed.iter().map(|w| w.span.end).collect::<Vec<_>>(),
+            vec![50, 100]
+        );
+        assembler.close_at_stream_end(121, &mut closed);
+        let last = closed.last().unwrap();
+        assert_eq!(
+            last.span,
+            TimeSpan {
+                start: 71,
+                end: 121
+            }
+        );
+        assert_eq!(
+            last.events.iter().map(|e| e.t).collect::<Vec<_>>(),
+            vec![120]
+        );
+        let windows = closed.len();
+        assembler.close_at_stream_end(121, &mut closed);
+        assert_eq!(closed.len(), windows, "the end closes one window only");
     }
 
     #[test]

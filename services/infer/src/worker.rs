@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use evgate_core::SensorSize;
 use evgate_model::{ForecastError, Forecaster, ModelError};
 
-use crate::latest_slot::LatestSlot;
+use crate::window_handover::WindowHandover;
 use crate::windowing::ClosedWindow;
 
 #[derive(Debug, thiserror::Error)]
@@ -70,11 +70,11 @@ impl Worker {
         }
     }
 
-    /// Takes windows until the slot closes, sending one result per window; stops at the first
+    /// Takes windows until the hand-over closes, sending one result per window; stops at the first
     /// error, after sending it.
     pub fn run(
         mut self,
-        slot: Arc<LatestSlot<WindowJob>>,
+        slot: Arc<WindowHandover<WindowJob>>,
         results: Sender<Result<ForecastReady, WorkerError>>,
     ) {
         while let Some(job) = slot.take() {

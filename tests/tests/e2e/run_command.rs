@@ -158,3 +158,98 @@ fn a_config_file_with_an_unknown_key_is_refused_naming_it() {
         "{message}"
     );
 }
+
+/// The verdicts of a `--keep-bits` file (`evgate eval --help`).
+const KEPT: u8 = 1;
+const NOT_GATED: u8 = 2;
+
+/// One `--keep-bits` file: a uint8 per event.
+fn read_verdicts(path: &std::path::Path) -> Vec<u8> {
+    let mut file = std::fs::File::open(path).unwrap();
+    evgate_io::npy::NpyArray::read(&mut file)
+        .unwrap()
+        .to_vec::<u8>()
+        .unwrap()
+}
+
+#[test]
+fn eval_and_a_lock_step_run_keep_exactly_the_same_events_of_a_recording() {
+    let recording = evgate_e2e::workspace_root().join("../shared/data/real/sample.aedat4");
+    let model = test_model_path();
+    let out = tempfile::tempdir().unwrap();
+    let settings = out.path().join("eval.json");
+    std::fs::write(
+        &settings,
+        r#"{"horizons-ms": [0, 10, 20, 30, 40, 50], "headline-horizon-ms": 50, "gate-span-ms": 50}"#,
+    )
+    .unwrap();
+    let path = |name: &str| out.path().join(name).to_str().unwrap().to_owned();
+    Process::start(
+        &evgate(),
+        &[
+            "eval",
+            "--input",
+            recording.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+            "--config",
+            &path("eval.json"),
+            "--report",
+            &path("report"),
+            "--keep-bits",
+            &path("eval-verdicts"),
+            "--json",
+        ],
+    )
+    .unwrap()
+    .summary(TIMEOUT)
+    .unwrap();
+    let summary = run_to_the_end(&[
+        "--input",
+        recording.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--lock-step",
+        "--horizons-ms",
+        "0,10,20,30,40,50",
+        "--keep-bits",
+        &path("run-verdicts.npy"),
+        "--fast",
+    ]);
+    assert_eq!(
+        u64_at(&summary, "/services/evgate-infer/windows-skipped-busy"),
+        0
+    );
+
+    let evaluated: Vec<_> = std::fs::read_dir(out.path().join("eval-verdicts"))
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .collect();
+    assert_eq!(evaluated.len(), 1, "{evaluated:?}");
+    let by_eval = read_verdicts(&evaluated[0]);
+    let by_run = read_verdicts(out.path().join("run-verdicts.npy").as_path());
+    assert_eq!(by_eval.len(), by_run.len());
+    let gated: Vec<usize> = (0..by_eval.len())
+        .filter(|&i| by_eval[i] != NOT_GATED)
+        .collect();
+    let kept = gated.iter().filter(|&&i| by_eval[i] == KEPT).count();
+    // Both fates occur, so agreement is not that of an empty or a full mask.
+    assert!(
+        kept > 0 && kept < gated.len() && gated.len() > by_eval.len() / 2,
+        "{kept} kept of {} gated of {} events",
+        gated.len(),
+        by_eval.len()
+    );
+    let differing: Vec<usize> = gated
+        .iter()
+        .copied()
+        .filter(|&i| by_eval[i] != by_run[i])
+        .collect();
+    assert!(
+        differing.is_empty(),
+        "{} of {} gated events differ, first at {:?}",
+        differing.len(),
+        gated.len(),
+        &differing[..differing.len().min(5)]
+    );
+}
