@@ -222,31 +222,7 @@ impl Evaluation {
                 sequence: name.to_owned(),
                 source: VoxelError::SensorTooLarge { sensor: size },
             })?;
-        // A model exported for a smaller input than this sensor's cannot see it: it sits this
-        // recording out (and so do the baselines built on the first model's mask).
-        let mut models_not_run = Vec::new();
-        let mut runs_here = Vec::with_capacity(self.models.len());
-        for model in &mut self.models {
-            let input = model.forecaster.runtime().input_size();
-            let fits = input.width >= padded.width && input.height >= padded.height;
-            runs_here.push(fits);
-            if !fits {
-                models_not_run.push(ModelNotRun {
-                    method: format!("model:{}", model.label),
-                    model_input: input,
-                    padded_sensor: padded,
-                });
-                continue;
-            }
-            let path = model.forecaster.runtime().model_path().to_path_buf();
-            model
-                .forecaster
-                .reset_state()
-                .map_err(|source| HarnessError::Model {
-                    path,
-                    source: Box::new(source),
-                })?;
-        }
+        let (runs_here, models_not_run) = self.prepare_models(padded)?;
 
         let config = self.config.clone();
         let horizons_us = config.horizons_us();
@@ -299,30 +275,8 @@ impl Evaluation {
             );
 
             // The recurrent state must see every window, even one we cannot score.
-            let mut model_outputs = Vec::with_capacity(self.models.len());
-            for (model, &runs) in self.models.iter_mut().zip(&runs_here) {
-                if !runs {
-                    model_outputs.push(None);
-                    continue;
-                }
-                let path = model.forecaster.runtime().model_path().to_path_buf();
-                let forecast = model
-                    .forecaster
-                    .forecast(size, window, span, &horizons_ms_f32)
-                    .map_err(|source| HarnessError::Forecast {
-                        path,
-                        source: Box::new(source),
-                    })?;
-                model_outputs.push(Some(MethodOutput {
-                    current: forecast.current.view().to_bools(),
-                    futures: forecast
-                        .futures
-                        .iter()
-                        .map(|mask| mask.view().to_bools())
-                        .collect(),
-                    runtime: forecast.inference,
-                }));
-            }
+            let model_outputs =
+                self.run_models(&runs_here, size, window, span, &horizons_ms_f32)?;
 
             let now = recording.truth_at(reference_us);
             // A recording with masks is scored only where a mask lies at t.
@@ -380,7 +334,8 @@ impl Evaluation {
                         || truth_at_every_gating_horizon
                 }
             };
-            for (index, (output, method)) in outputs.iter().zip(&self.methods).enumerate() {
+            let kinds: Vec<MethodKind> = self.methods.iter().map(|method| method.kind).collect();
+            for (index, (output, &kind)) in outputs.iter().zip(&kinds).enumerate() {
                 let Some(output) = output else {
                     continue;
                 };
@@ -388,7 +343,7 @@ impl Evaluation {
                 accumulator
                     .runtime_ms
                     .add(output.runtime.as_secs_f64() * 1e3);
-                if can_gate(method.kind) {
+                if can_gate(kind) {
                     let gate = score_events(
                         &gated,
                         reference_us,
@@ -409,32 +364,8 @@ impl Evaluation {
                     });
                     accumulator.events.merge(gate.confusion);
                 }
-                let Some(now) = truth.now else {
-                    continue;
-                };
-                let point = PixelConfusion::count_where(&output.current, now, &truth.presence)
+                self.score_masks(index, output, &truth, size, accumulator)
                     .map_err(scoring_error)?;
-                accumulator.point_iou.add(point.imo_iou());
-                for (k, future) in output.futures.iter().enumerate() {
-                    let Some(target) = truth.at_horizon[k] else {
-                        continue;
-                    };
-                    let pixels = PixelConfusion::count(future, target).map_err(scoring_error)?;
-                    let instances = match_instances(future, target, size, config.iou_threshold)
-                        .map_err(scoring_error)?;
-                    accumulator.horizons[k].add(&pixels, instances, config.iou_threshold);
-                    if k == headline {
-                        let binned = &mut self.binned[index];
-                        if let Some(bin) = self.event_bins.bin(truth.events_in_window as f64) {
-                            binned.events_per_window.add(bin, pixels.mean_iou());
-                        }
-                        if let Some(speed) = truth.speed_px_per_s {
-                            binned
-                                .speed
-                                .add(config.speed_bucket(speed), pixels.mean_iou());
-                        }
-                    }
-                }
             }
             if truth.now.is_some() {
                 self.sweep_oms(&truth, size, headline, &mut sweep)
@@ -479,6 +410,112 @@ impl Evaluation {
         });
         Ok(self.sequences.last().expect("just pushed"))
     }
+    /// Scores one method's current and future masks against the truth of one reference time,
+    /// where the recording has masks.
+    fn score_masks(
+        &mut self,
+        method_index: usize,
+        output: &MethodOutput,
+        truth: &ReferenceTruth<'_>,
+        size: SensorSize,
+        accumulator: &mut MethodAccumulator,
+    ) -> Result<(), SegmentationError> {
+        let Some(now) = truth.now else {
+            return Ok(());
+        };
+        let iou_threshold = self.config.iou_threshold;
+        let point = PixelConfusion::count_where(&output.current, now, &truth.presence)?;
+        accumulator.point_iou.add(point.imo_iou());
+        for (k, future) in output.futures.iter().enumerate() {
+            let Some(target) = truth.at_horizon[k] else {
+                continue;
+            };
+            let pixels = PixelConfusion::count(future, target)?;
+            let instances = match_instances(future, target, size, iou_threshold)?;
+            accumulator.horizons[k].add(&pixels, instances, iou_threshold);
+            if k == self.config.headline_index() {
+                let binned = &mut self.binned[method_index];
+                if let Some(bin) = self.event_bins.bin(truth.events_in_window as f64) {
+                    binned.events_per_window.add(bin, pixels.mean_iou());
+                }
+                if let Some(speed) = truth.speed_px_per_s {
+                    binned
+                        .speed
+                        .add(self.config.speed_bucket(speed), pixels.mean_iou());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Resets the state of every model that can see a sensor padded to `padded`; the others
+    /// sit the recording out (and so do the baselines built on the first model's mask).
+    fn prepare_models(
+        &mut self,
+        padded: SensorSize,
+    ) -> Result<(Vec<bool>, Vec<ModelNotRun>), HarnessError> {
+        let mut models_not_run = Vec::new();
+        let mut runs_here = Vec::with_capacity(self.models.len());
+        for model in &mut self.models {
+            let input = model.forecaster.runtime().input_size();
+            let fits = input.width >= padded.width && input.height >= padded.height;
+            runs_here.push(fits);
+            if !fits {
+                models_not_run.push(ModelNotRun {
+                    method: format!("model:{}", model.label),
+                    model_input: input,
+                    padded_sensor: padded,
+                });
+                continue;
+            }
+            let path = model.forecaster.runtime().model_path().to_path_buf();
+            model
+                .forecaster
+                .reset_state()
+                .map_err(|source| HarnessError::Model {
+                    path,
+                    source: Box::new(source),
+                })?;
+        }
+        Ok((runs_here, models_not_run))
+    }
+
+    /// Each model's masks for one window (`None` for a model that sits the recording out).
+    fn run_models(
+        &mut self,
+        runs_here: &[bool],
+        size: SensorSize,
+        window: &[evgate_core::Event],
+        span: TimeSpan,
+        horizons_ms: &[f32],
+    ) -> Result<Vec<Option<MethodOutput>>, HarnessError> {
+        let mut model_outputs = Vec::with_capacity(self.models.len());
+        for (model, &runs) in self.models.iter_mut().zip(runs_here) {
+            if !runs {
+                model_outputs.push(None);
+                continue;
+            }
+            let path = model.forecaster.runtime().model_path().to_path_buf();
+            let forecast = model
+                .forecaster
+                .forecast(size, window, span, horizons_ms)
+                .map_err(|source| HarnessError::Forecast {
+                    path,
+                    source: Box::new(source),
+                })?;
+            model_outputs.push(Some(MethodOutput {
+                current: forecast.current.view().to_bools(),
+                futures: forecast
+                    .futures
+                    .iter()
+                    .map(|mask| mask.view().to_bools())
+                    .collect(),
+                runtime: forecast.inference,
+            }));
+        }
+        Ok(model_outputs)
+    }
+
     /// Scores every OMS setting of the sweep at the headline horizon and the current instant.
     fn sweep_oms(
         &self,
