@@ -300,19 +300,21 @@ fn send_packets(received: &Receiver<Message>, clients: &Mutex<Clients>) {
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_unix_socket_client_gets_the_header_then_every_batch() {
+    /// A server on a Unix socket in a fresh folder, and one accepted client.
+    struct Served {
+        directory: tempfile::TempDir,
+        endpoint: String,
+        server: KeptServer,
+        client: std::os::unix::net::UnixStream,
+    }
+
+    fn serve_one_client(overflow: Overflow, block_timeout: Duration) -> Served {
         let directory = tempfile::tempdir().unwrap();
         let path = directory.path().join("kept.sock");
         let endpoint = format!("unix://{}", path.display());
         let gauge = Gauge::default();
-        let server = KeptServer::start(
-            &endpoint,
-            Some(gauge.clone()),
-            Overflow::DropAndCount,
-            Duration::ZERO,
-        )
-        .unwrap();
+        let server =
+            KeptServer::start(&endpoint, Some(gauge.clone()), overflow, block_timeout).unwrap();
         let client = std::os::unix::net::UnixStream::connect(&path).unwrap();
         let deadline = std::time::Instant::now() + Duration::from_secs(30);
         while gauge.get() != 1 {
@@ -322,6 +324,23 @@ mod tests {
             );
             std::thread::sleep(Duration::from_millis(5));
         }
+        Served {
+            directory,
+            endpoint,
+            server,
+            client,
+        }
+    }
+
+    #[test]
+    fn a_unix_socket_client_gets_the_header_then_every_batch() {
+        let Served {
+            directory,
+            endpoint,
+            server,
+            client,
+        } = serve_one_client(Overflow::DropAndCount, Duration::ZERO);
+        let path = directory.path().join("kept.sock");
         let sensor = SensorSize::new(320, 240);
         let batches = [
             vec![Event::new(10, 1, 2, true), Event::new(11, 3, 4, false)],
@@ -346,23 +365,12 @@ mod tests {
 
     #[test]
     fn under_block_a_client_slower_than_the_write_timeout_loses_nothing() {
-        let directory = tempfile::tempdir().unwrap();
-        let path = directory.path().join("kept.sock");
-        let endpoint = format!("unix://{}", path.display());
-        let gauge = Gauge::default();
-        let server = KeptServer::start(
-            &endpoint,
-            Some(gauge.clone()),
-            Overflow::Block,
-            Duration::from_secs(60),
-        )
-        .unwrap();
-        let client = std::os::unix::net::UnixStream::connect(&path).unwrap();
-        let deadline = std::time::Instant::now() + Duration::from_secs(30);
-        while gauge.get() != 1 {
-            assert!(std::time::Instant::now() < deadline, "never accepted");
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        let Served {
+            directory: _directory,
+            endpoint,
+            server,
+            client,
+        } = serve_one_client(Overflow::Block, Duration::from_secs(60));
         let sensor = SensorSize::new(320, 240);
         let batch: Vec<Event> = (0..1000)
             .map(|i| Event::new(i, (i % 320) as u16, 7, true))

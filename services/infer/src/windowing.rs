@@ -129,17 +129,21 @@ impl WindowAssembler {
                 self.buffer.first().map_or(end_us - 1, |e| e.t)
             }
         };
-        let span = TimeSpan {
+        closed.push(self.window(TimeSpan {
             start: start.min(end_us - 1),
             end: end_us,
-        };
+        }));
+        self.stream_end_us = Some(end_us);
+    }
+
+    /// The buffered events of `span` (both ends included), as a closed window.
+    fn window(&self, span: TimeSpan) -> ClosedWindow {
         let first = self.buffer.partition_point(|e| e.t < span.start);
         let last = self.buffer.partition_point(|e| e.t <= span.end);
-        closed.push(ClosedWindow {
+        ClosedWindow {
             span,
             events: self.buffer[first..last.max(first)].to_vec(),
-        });
-        self.stream_end_us = Some(end_us);
+        }
     }
 
     fn close_by_duration(
@@ -172,16 +176,10 @@ impl WindowAssembler {
             }
         }
         while reference <= last_complete {
-            let span = TimeSpan {
+            closed.push(self.window(TimeSpan {
                 start: reference - window_us,
                 end: reference,
-            };
-            let first = self.buffer.partition_point(|e| e.t < span.start);
-            let last = self.buffer.partition_point(|e| e.t <= span.end);
-            closed.push(ClosedWindow {
-                span,
-                events: self.buffer[first..last.max(first)].to_vec(),
-            });
+            }));
             reference += stride_us;
         }
         self.next_reference_us = Some(reference);
