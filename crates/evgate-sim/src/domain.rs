@@ -39,6 +39,8 @@ pub mod ranges {
     use std::ops::Range;
 
     pub const THRESHOLD: Range<f32> = 0.12..0.35;
+    /// ON and OFF thresholds of the fastest motion stratum, drawn log-uniformly.
+    pub const BUSY_THRESHOLD: Range<f32> = 0.07..0.12;
     pub const THRESHOLD_SIGMA: Range<f32> = 0.01..0.06;
     pub const REFRACTORY_US: Range<i64> = 100..1_500;
     pub const SHOT_NOISE_HZ: Range<f32> = 0.05..2.0;
@@ -47,13 +49,25 @@ pub mod ranges {
     pub const TIMESTAMP_JITTER_US: Range<f32> = 0.0..60.0;
 }
 
-/// Factor on the preset's camera and object speeds, drawn log-uniformly in every split: with
-/// the sensor draws it spreads the events per 50 ms window over three decades (a third of the
-/// speed of the slowest presets to four times that of the fastest).
-const MOTION_SCALE: Range<f32> = 0.5..4.0;
+/// Factor on the preset's camera and object speeds, drawn log-uniformly in every split.
+const MOTION_SCALE: Range<f32> = 0.5..8.0;
+
+/// The motion draw is stratified: a sequence's stratum picks one of this many equal parts of
+/// the log range, so a split with this many sequences per preset holds slow and fast ones alike
+/// instead of leaving the busiest windows to chance. The fastest stratum also gets the most
+/// sensitive sensors ([`ranges::BUSY_THRESHOLD`]): together they carry the events per 50 ms
+/// window from 10^3 to 10^6.
+pub const MOTION_STRATA: u64 = 4;
 
 fn log_uniform(rng: &mut impl Rng, range: Range<f32>) -> f32 {
     rng.gen_range(range.start.ln()..range.end.ln()).exp()
+}
+
+fn stratified_log_uniform(rng: &mut impl Rng, range: Range<f32>, stratum: u64) -> f32 {
+    let (low, high) = (range.start.ln(), range.end.ln());
+    let width = (high - low) / MOTION_STRATA as f32;
+    let start = low + width * stratum as f32;
+    rng.gen_range(start..start + width).exp()
 }
 
 /// A value from `low` or `high`, each half the time: the out-of-domain draws lie on both
@@ -95,10 +109,18 @@ fn texture_style(rng: &mut impl Rng, weak_edges: bool) -> TextureStyle {
     }
 }
 
-fn in_domain_sensor(rng: &mut impl Rng, base: &EventModel) -> EventModel {
+fn in_domain_threshold(rng: &mut impl Rng, busy: bool) -> f32 {
+    if busy {
+        log_uniform(rng, ranges::BUSY_THRESHOLD)
+    } else {
+        rng.gen_range(ranges::THRESHOLD)
+    }
+}
+
+fn in_domain_sensor(rng: &mut impl Rng, base: &EventModel, busy: bool) -> EventModel {
     EventModel {
-        threshold_on: rng.gen_range(ranges::THRESHOLD),
-        threshold_off: rng.gen_range(ranges::THRESHOLD),
+        threshold_on: in_domain_threshold(rng, busy),
+        threshold_off: in_domain_threshold(rng, busy),
         threshold_sigma: rng.gen_range(ranges::THRESHOLD_SIGMA),
         refractory_us: rng.gen_range(ranges::REFRACTORY_US),
         shot_noise_hz: rng.gen_range(ranges::SHOT_NOISE_HZ),
@@ -131,8 +153,8 @@ fn scale_motion(scene: &mut SceneParams, factor: f32) {
 
 fn out_of_domain_sensor(rng: &mut impl Rng, base: &EventModel) -> EventModel {
     EventModel {
-        threshold_on: either(rng, 0.09..0.115, 0.38..0.55),
-        threshold_off: either(rng, 0.09..0.115, 0.38..0.55),
+        threshold_on: either(rng, 0.05..0.065, 0.38..0.55),
+        threshold_off: either(rng, 0.05..0.065, 0.38..0.55),
         threshold_sigma: rng.gen_range(0.065..0.1),
         refractory_us: if rng.gen_bool(0.5) {
             rng.gen_range(20..90)
@@ -148,15 +170,23 @@ fn out_of_domain_sensor(rng: &mut impl Rng, base: &EventModel) -> EventModel {
 }
 
 /// The configuration of one suite-v5 sequence: `preset`'s scene and camera with textures and
-/// sensor drawn for `seed` from `domain`.
-pub fn randomised_config(preset: Preset, seed: u64, domain: &Domain) -> SimConfig {
+/// sensor drawn for `seed` from `domain`, and its motion from stratum `motion_stratum` (taken
+/// modulo [`MOTION_STRATA`]).
+pub fn randomised_config(
+    preset: Preset,
+    seed: u64,
+    motion_stratum: u64,
+    domain: &Domain,
+) -> SimConfig {
     let mut config = preset.config();
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ DRAW_SALT);
+    let stratum = motion_stratum % MOTION_STRATA;
     match domain {
         Domain::InDomain => {
             config.scene.world_texture = texture_style(&mut rng, false);
             config.scene.object_texture = texture_style(&mut rng, true);
-            config.events = in_domain_sensor(&mut rng, &config.events);
+            let busy = stratum == MOTION_STRATA - 1;
+            config.events = in_domain_sensor(&mut rng, &config.events, busy);
             config.events.timestamp_jitter_us = rng.gen_range(ranges::TIMESTAMP_JITTER_US);
         }
         Domain::OutOfDomain { photographs } => {
@@ -166,7 +196,8 @@ pub fn randomised_config(preset: Preset, seed: u64, domain: &Domain) -> SimConfi
         }
     }
     config.scene.variation = object_variation(&mut rng);
-    scale_motion(&mut config.scene, log_uniform(&mut rng, MOTION_SCALE));
+    let factor = stratified_log_uniform(&mut rng, MOTION_SCALE, stratum);
+    scale_motion(&mut config.scene, factor);
     config
 }
 
@@ -176,9 +207,9 @@ mod tests {
 
     #[test]
     fn draws_are_reproducible_and_differ_between_seeds() {
-        let a = randomised_config(Preset::Boxes, 7, &Domain::InDomain);
-        assert_eq!(a, randomised_config(Preset::Boxes, 7, &Domain::InDomain));
-        assert_ne!(a, randomised_config(Preset::Boxes, 8, &Domain::InDomain));
+        let a = randomised_config(Preset::Boxes, 7, 0, &Domain::InDomain);
+        assert_eq!(a, randomised_config(Preset::Boxes, 7, 0, &Domain::InDomain));
+        assert_ne!(a, randomised_config(Preset::Boxes, 8, 0, &Domain::InDomain));
         assert_eq!(a.scene.layout, Preset::Boxes.config().scene.layout);
         let preset = Preset::Boxes.config().scene;
         let factor = a.scene.object_speed_mps / preset.object_speed_mps;
@@ -196,11 +227,13 @@ mod tests {
             photographs: vec![PathBuf::from("photo.png")],
         };
         for seed in 0..200 {
-            let config = randomised_config(Preset::Wall, seed, &domain);
+            let config = randomised_config(Preset::Wall, seed, seed, &domain);
             let events = config.events;
             assert!(events.invalid_field().is_none(), "{events:?}");
-            assert!(!ranges::THRESHOLD.contains(&events.threshold_on));
-            assert!(!ranges::THRESHOLD.contains(&events.threshold_off));
+            for training in [ranges::THRESHOLD, ranges::BUSY_THRESHOLD] {
+                assert!(!training.contains(&events.threshold_on));
+                assert!(!training.contains(&events.threshold_off));
+            }
             assert!(!ranges::THRESHOLD_SIGMA.contains(&events.threshold_sigma));
             assert!(!ranges::REFRACTORY_US.contains(&events.refractory_us));
             assert!(!ranges::SHOT_NOISE_HZ.contains(&events.shot_noise_hz));
@@ -215,9 +248,14 @@ mod tests {
     fn in_domain_draws_stay_in_range_and_use_the_new_texture_families() {
         let mut families_seen = [false; 4];
         for seed in 0..100 {
-            let config = randomised_config(Preset::Table, seed, &Domain::InDomain);
+            let config = randomised_config(Preset::Table, seed, seed, &Domain::InDomain);
             let events = config.events;
-            assert!(ranges::THRESHOLD.contains(&events.threshold_on));
+            let thresholds = if seed % MOTION_STRATA == MOTION_STRATA - 1 {
+                ranges::BUSY_THRESHOLD
+            } else {
+                ranges::THRESHOLD
+            };
+            assert!(thresholds.contains(&events.threshold_on));
             assert!(ranges::REFRACTORY_US.contains(&events.refractory_us));
             assert!(ranges::TIMESTAMP_JITTER_US.contains(&events.timestamp_jitter_us));
             assert!(config.scene.variation.cutout_share > 0.0);
@@ -230,5 +268,25 @@ mod tests {
             }
         }
         assert_eq!(families_seen, [true; 4]);
+    }
+
+    #[test]
+    fn each_motion_stratum_draws_from_its_own_part_of_the_range() {
+        let preset = Preset::Fast.config().scene;
+        let (low, high) = (MOTION_SCALE.start.ln(), MOTION_SCALE.end.ln());
+        let width = (high - low) / MOTION_STRATA as f32;
+        for stratum in 0..MOTION_STRATA {
+            for seed in 0..50 {
+                let config = randomised_config(Preset::Fast, seed, stratum, &Domain::InDomain);
+                let factor = config.scene.ego_translation_mps / preset.ego_translation_mps;
+                let start = low + width * stratum as f32;
+                assert!(
+                    (start - 1e-4..=start + width + 1e-4).contains(&factor.ln()),
+                    "stratum {stratum}, seed {seed}: factor {factor}"
+                );
+                let busy = ranges::BUSY_THRESHOLD.contains(&config.events.threshold_on);
+                assert_eq!(busy, stratum == MOTION_STRATA - 1, "stratum {stratum}");
+            }
+        }
     }
 }

@@ -116,6 +116,8 @@ pub struct SuiteEntry {
     pub split: Split,
     pub preset: Preset,
     pub seed: u64,
+    /// Position among its split's sequences of the same preset; picks the motion stratum.
+    pub index: u64,
     pub duration_us: i64,
 }
 
@@ -172,6 +174,7 @@ pub fn suite_plan(scale: SuiteScale) -> Vec<SuiteEntry> {
                     split,
                     preset,
                     seed,
+                    index: i,
                     duration_us: counts.duration_us,
                 });
             }
@@ -190,7 +193,7 @@ impl SuiteEntry {
             },
             _ => Domain::InDomain,
         };
-        randomised_config(self.preset, self.seed, &domain)
+        randomised_config(self.preset, self.seed, self.index, &domain)
     }
 }
 
