@@ -1,7 +1,7 @@
 //! The newest valid forecast, copied out of shared memory so the sample is returned at once.
 
 use evgate_core::{words_for, Forecast, ForecastView, GateError, MaskError, MaskView, SensorSize};
-use evgate_ipc::{ForecastError, ForecastHeader};
+use evgate_ipc::{BatchHeader, ForecastError, ForecastHeader};
 
 /// Why a received forecast was ignored.
 #[derive(Debug, thiserror::Error)]
@@ -49,6 +49,11 @@ impl StoredForecast {
             }
         })?;
         Ok(stored)
+    }
+
+    /// Whether it was computed from this batch's stream and sensor.
+    pub fn describes(&self, batch: &BatchHeader) -> bool {
+        self.header.source_stream_id == batch.stream_id && self.sensor() == batch.sensor()
     }
 
     pub fn sensor(&self) -> SensorSize {

@@ -325,11 +325,6 @@ enum Drained {
     Signal,
 }
 
-/// Whether the stored forecast describes this batch's stream and sensor.
-fn describes(forecast: &StoredForecast, header: &BatchHeader) -> bool {
-    forecast.header.source_stream_id == header.stream_id && forecast.sensor() == header.sensor()
-}
-
 impl Gate {
     /// Keeps the newest valid forecast; returns how many forecasts arrived.
     fn take_forecasts(
@@ -394,7 +389,7 @@ impl Gate {
                     let stored = self.forecast.take();
                     let forecast = stored
                         .as_ref()
-                        .filter(|forecast| describes(forecast, &header))
+                        .filter(|forecast| forecast.describes(&header))
                         .map(StoredForecast::forecast);
                     let gated =
                         self.gate_batch(node, &header, sample.payload(), forecast.as_slice());
