@@ -1,4 +1,5 @@
-"""Flips and polarity inversion, applied alike to the voxel grid, targets and events.
+"""Flips and polarity inversion, applied alike to the voxel grid, targets and events, and the
+event jitter that only the voxel grid sees (built with it, `reference_voxel`).
 
 One draw per stream: the recurrence must see one consistent world across windows.
 """
@@ -8,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .jitter import EventJitter
 from .windows import FutureEvents, TrainingWindow
 
 # [..., H, W] fields of a TrainingWindow that flip with the image.
@@ -19,6 +21,7 @@ class Augmentation:
     flip_horizontal: bool
     flip_vertical: bool
     invert_polarity: bool
+    jitter: EventJitter = EventJitter()
 
     @staticmethod
     def draw(rng: np.random.Generator) -> "Augmentation":
@@ -27,6 +30,13 @@ class Augmentation:
     @staticmethod
     def none() -> "Augmentation":
         return Augmentation(False, False, False)
+
+    @staticmethod
+    def from_dict(fields: dict) -> "Augmentation":
+        """The inverse of `dataclasses.asdict`; a cursor saved before jitter existed has none."""
+        fields = dict(fields)
+        jitter = EventJitter(**fields.pop("jitter", {}))
+        return Augmentation(**fields, jitter=jitter)
 
 
 def augmented_voxel(voxel: np.ndarray, augmentation: Augmentation) -> np.ndarray:

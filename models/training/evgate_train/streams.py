@@ -9,13 +9,14 @@ continues the same data stream."""
 
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from .augment import Augmentation, apply, augmented_voxel
 from .batches import WindowBatch, collate
+from .jitter import EventJitter, JitterRanges
 from .sequence import Sequence, load_sequence
 from .voxel import padded
 from .windows import Crop, cropped, draw_horizons, reference_voxel, training_window
@@ -61,6 +62,7 @@ class StreamSampler:
         max_events: int,
         augment: bool,
         seed: int,
+        jitter: JitterRanges | None = None,
     ):
         if not paths:
             raise StreamSetupError("no training sequences")
@@ -75,6 +77,10 @@ class StreamSampler:
         self.max_events = max_events
         self.augment = augment
         self.rng = np.random.default_rng(seed)
+        # Jitter draws from its own generator, so a run with jitter plays the same sequences,
+        # crops and horizons as one without: the two can be compared pair by pair.
+        self.jitter = jitter
+        self.jitter_rng = np.random.default_rng([seed, 1])
         self.order: list[int] = []
         self.position = 0
         self.passes = 0
@@ -113,6 +119,8 @@ class StreamSampler:
             width=self.crop_width,
         )
         augmentation = Augmentation.draw(self.rng) if self.augment else Augmentation.none()
+        if self.jitter is not None:
+            augmentation = replace(augmentation, jitter=EventJitter.draw(self.jitter_rng, self.jitter))
         # Streams start a few windows apart so that the slots do not all restart on one step.
         first = int(self.rng.integers(self.windows_per_step))
         return StreamCursor(index, crop, augmentation, first, first)
@@ -148,7 +156,7 @@ class StreamSampler:
                 reference,
                 cursor.crop,
                 draw_horizons(self.rng, self.horizons),
-                reference_voxel(sequence, reference),
+                reference_voxel(sequence, reference, cursor.augmentation.jitter),
                 self.max_events,
                 self.rng,
             )
@@ -164,7 +172,10 @@ class StreamSampler:
             return []
         sequence = self._sequence(cursor.sequence)
         return [
-            augmented_voxel(cropped(reference_voxel(sequence, reference), cursor.crop), cursor.augmentation)
+            augmented_voxel(
+                cropped(reference_voxel(sequence, reference, cursor.augmentation.jitter), cursor.crop),
+                cursor.augmentation,
+            )
             for reference in range(cursor.first_reference, cursor.next_reference)
         ]
 
@@ -173,6 +184,7 @@ class StreamSampler:
         return {
             "paths": [str(p) for p in self.paths],
             "rng": self.rng.bit_generator.state,
+            "jitter-rng": self.jitter_rng.bit_generator.state,
             "order": list(self.order),
             "position": self.position,
             "passes": self.passes,
@@ -188,12 +200,14 @@ class StreamSampler:
         if len(state["cursors"]) != self.streams:
             raise StreamSetupError(f"the data cursor has {len(state['cursors'])} streams, this run {self.streams}")
         self.rng.bit_generator.state = state["rng"]
+        if "jitter-rng" in state:
+            self.jitter_rng.bit_generator.state = state["jitter-rng"]
         self.order, self.position, self.passes = list(state["order"]), int(state["position"]), int(state["passes"])
         self.cursors = [
             StreamCursor(
                 c["sequence"],
                 Crop(**c["crop"]),
-                Augmentation(**c["augmentation"]),
+                Augmentation.from_dict(c["augmentation"]),
                 c["first_reference"],
                 c["next_reference"],
             )

@@ -32,6 +32,7 @@ from tqdm import tqdm
 from .checkpoint import load_checkpoint, save_checkpoint, with_time_conditioning
 from .evaluate import aggregate, evaluate_sequence
 from .network import NetworkConfig, SuppressionNetwork, check_input_size
+from .jitter import JitterRanges
 from .objective import LossWeights, window_objective
 from .sequence import load_sequence
 from .streams import StreamSampler, StreamStep, preset_of
@@ -163,6 +164,27 @@ def build_parser() -> argparse.ArgumentParser:
         "their weights over these steps, so the current mask is learnt first",
     )
     parser.add_argument("--no-augment", action="store_true", help="disable flips and polarity inversion")
+    parser.add_argument(
+        "--event-jitter",
+        action="store_true",
+        help="jitter each stream's input events (dropout, polarity flips, local rate scaling) within the "
+        "--jitter-* ranges; targets are unchanged",
+    )
+    parser.add_argument(
+        "--jitter-max-dropout", type=float, default=0.5, help="a stream drops a share of its events drawn from [0, this)"
+    )
+    parser.add_argument(
+        "--jitter-max-polarity-flip",
+        type=float,
+        default=0.1,
+        help="a stream flips the polarity of a share of its events drawn from [0, this]",
+    )
+    parser.add_argument(
+        "--jitter-min-rate",
+        type=float,
+        default=0.25,
+        help="lowest local keep factor of a stream's smooth rate field (drawn log-uniformly from [this, 1])",
+    )
     parser.add_argument("--seed", type=int, default=7, help="seed of weights, sampling and augmentation")
     parser.add_argument(
         "--threads",
@@ -368,6 +390,9 @@ def train(args: argparse.Namespace) -> Path:
         args.max_contrast_events if args.contrast_weight > 0 else 0,
         not args.no_augment,
         args.seed,
+        JitterRanges(args.jitter_max_dropout, args.jitter_max_polarity_flip, args.jitter_min_rate)
+        if args.event_jitter
+        else None,
     )
     if continuation is not None:
         sampler.load_state_dict(continuation["data"])

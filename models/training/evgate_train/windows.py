@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .jitter import EventJitter
 from .sequence import GRID_US, Sequence
 from .voxel import WINDOW_US, voxel_grid
 
@@ -67,19 +68,21 @@ def draw_horizons(rng: np.random.Generator, count: int) -> np.ndarray:
     return np.concatenate([[SCORED_HORIZON_MS], np.sort(others)]).astype(np.float32)
 
 
-def reference_voxel(sequence: Sequence, reference: int) -> np.ndarray:
-    """The full (padded) voxel grid [2, H, W] of the 50 ms window ending at reference time `reference`."""
+def reference_voxel(sequence: Sequence, reference: int, jitter: EventJitter = EventJitter()) -> np.ndarray:
+    """The full (padded) voxel grid [2, H, W] of the 50 ms window ending at reference time
+    `reference`, of the events as `jitter` alters them."""
     t_end = int(sequence.ref_ts[reference])
     window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
-    return voxel_grid(
+    t, x, y, on = jitter.events(
         sequence.events_t[window],
         sequence.events_x[window],
         sequence.events_y[window],
         sequence.events_on[window],
-        t_end,
         sequence.width,
         sequence.height,
+        reference,
     )
+    return voxel_grid(t, x, y, on, t_end, sequence.width, sequence.height)
 
 
 def cropped(array: np.ndarray, crop: Crop) -> np.ndarray:

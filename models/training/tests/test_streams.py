@@ -2,15 +2,16 @@ import numpy as np
 import pytest
 import torch
 
+from evgate_train.jitter import JitterRanges
 from evgate_train.network import NetworkConfig, SuppressionNetwork
 from evgate_train.objective import LossWeights
 from evgate_train.streams import StreamSampler, StreamSetupError
 from evgate_train.train import carried_states, replayed_states, train_step
 
 
-def _sampler(synthetic_dir, streams=3, windows=2, seed=5) -> StreamSampler:
+def _sampler(synthetic_dir, streams=3, windows=2, seed=5, jitter=None) -> StreamSampler:
     paths = sorted(synthetic_dir.rglob("*.npz"))
-    return StreamSampler(paths, streams, windows, 48, 96, 3, 0, augment=True, seed=seed)
+    return StreamSampler(paths, streams, windows, 48, 96, 3, 0, augment=True, seed=seed, jitter=jitter)
 
 
 def test_each_slot_plays_its_sequence_window_after_window_until_it_ends(synthetic_dir):
@@ -45,14 +46,15 @@ def test_sequences_are_taken_in_shuffled_passes(synthetic_dir):
         assert sorted(taken[start : start + 2]) == [0, 1]
 
 
-def test_the_state_is_carried_across_steps_and_reset_where_a_stream_starts(synthetic_dir):
+@pytest.mark.parametrize("jitter", [None, JitterRanges()], ids=["plain", "jittered"])
+def test_the_state_is_carried_across_steps_and_reset_where_a_stream_starts(synthetic_dir, jitter):
     torch.manual_seed(0)
     network = SuppressionNetwork(NetworkConfig(size="XS"))
     # Fixed weights and batch-norm statistics: the carried state must then be exactly what
     # playing the stream from its start produces, and zero where it starts.
     network.eval()
     optimiser = torch.optim.SGD(network.parameters(), lr=0.0)
-    sampler = _sampler(synthetic_dir, streams=2)
+    sampler = _sampler(synthetic_dir, streams=2, jitter=jitter)
     states = network.initial_states(2, 48, 96)
     seen_start_after_carry = False
     for index in range(8):
