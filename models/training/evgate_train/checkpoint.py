@@ -74,6 +74,14 @@ def load_checkpoint(path: Path) -> Checkpoint:
     )
 
 
+def with_input_normalisation(network: SuppressionNetwork, normalisation: str) -> SuppressionNetwork:
+    """The same network (every weight) rescaling its input as `normalisation` says: the
+    normalisations have no weights, so a trained network can be fine-tuned under another."""
+    switched = SuppressionNetwork(dataclasses.replace(network.config, input_normalisation=normalisation))
+    switched.load_state_dict(network.state_dict())
+    return switched
+
+
 def with_time_conditioning(network: SuppressionNetwork, variant: str) -> SuppressionNetwork:
     """A network of another time-conditioning variant holding every weight of `network` that the
     variant shares: the rows of an ablation that start from one trained network. Weights the

@@ -17,6 +17,7 @@ import torch.nn.functional as F
 from .decoder import upsample
 from .export_gru import gru_step
 from .factorised_attention import condition_horizons
+from .input_normalisation import normalise_input
 from .network import FLOW_DECODER_LEVELS, SuppressionNetwork, check_warp_resolution
 from .warp import backward_warp, normalising_scale
 
@@ -38,7 +39,7 @@ def export_forward(
     check_warp_resolution(warp_resolution)
     _, _, height, width = voxel.shape
     horizons = horizons_ms.shape[0]
-    x = voxel
+    x = normalise_input(voxel, network.config.input_normalisation)
     new_states = []
     for downsample, recurrent, state in zip(network.downsamples, network.recurrent, states):
         x = gru_step(recurrent, torch.relu(downsample(x)), state)

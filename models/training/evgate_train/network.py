@@ -16,6 +16,7 @@ from torch import nn
 
 from .convgru import ConvGRU
 from .decoder import Decoder, upsample
+from .input_normalisation import check_input_normalisation, normalise_input
 from .sizes import STAGES, base_channels, stage_channels
 from .time_conditioning import TimeConditioning, check_variant
 from .warp import backward_warp, backward_warp_normalised, normalising_scale
@@ -59,6 +60,7 @@ class NetworkConfig:
     time_conditioning: str = "position-aware"
     attention_heads: int = 4
     residual_blocks: int = 2
+    input_normalisation: str = "global"
 
     @property
     def base(self) -> int:
@@ -110,6 +112,7 @@ class SuppressionNetwork(nn.Module):
     def __init__(self, config: NetworkConfig):
         super().__init__()
         check_variant(config.time_conditioning)
+        check_input_normalisation(config.input_normalisation)
         self.config = config
         channels = config.state_channels
         self.downsamples = nn.ModuleList()
@@ -153,7 +156,7 @@ class SuppressionNetwork(nn.Module):
         check_warp_resolution(warp_resolution)
         batch, _, height, width = voxel.shape
         horizons = horizons_ms.shape[1]
-        x = voxel
+        x = normalise_input(voxel, self.config.input_normalisation)
         new_states = []
         for downsample, recurrent, state in zip(self.downsamples, self.recurrent, states):
             x = recurrent(F.relu(downsample(x)), state)

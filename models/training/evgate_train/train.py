@@ -29,13 +29,14 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from .checkpoint import load_checkpoint, save_checkpoint, with_time_conditioning
+from .checkpoint import load_checkpoint, save_checkpoint, with_input_normalisation, with_time_conditioning
 from .evaluate import aggregate, evaluate_sequence
 from .network import NetworkConfig, SuppressionNetwork, check_input_size
 from .jitter import JitterRanges
 from .objective import LossWeights, window_objective
 from .sequence import load_sequence
 from .streams import StreamSampler, StreamStep, preset_of
+from .input_normalisation import INPUT_NORMALISATIONS
 from .time_conditioning import VARIANTS
 from .windows import SCORED_HORIZON_MS
 
@@ -123,6 +124,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--size", default="S", help="model size: XS, S, M or L")
     parser.add_argument(
         "--time-conditioning", default="position-aware", help="ATC variant: position-aware, reference or none"
+    )
+    parser.add_argument(
+        "--input-normalisation",
+        choices=INPUT_NORMALISATIONS,
+        help="how the network rescales its voxel input: global (as given, the default for a new network) "
+        "or local (by the RMS of the active cells around each pixel); with --init-from it switches the "
+        "checkpoint's network, keeping every weight; with --resume it must match the checkpoint",
     )
     parser.add_argument("--steps", type=int, default=20000, help="optimiser steps (the learning-rate schedule's length)")
     parser.add_argument("--streams", type=int, default=4, help="sequences played side by side (the batch)")
@@ -368,6 +376,12 @@ def train(args: argparse.Namespace) -> Path:
                 f"but --manifest hashes to {digest[:12]}"
             )
         network, start_step, optimiser_state = checkpoint.network, checkpoint.step, checkpoint.optimiser_state
+        resumed_normalisation = network.config.input_normalisation
+        if args.input_normalisation not in (None, resumed_normalisation):
+            raise TrainingSetupError(
+                f"--input-normalisation {args.input_normalisation}: {checkpoint_path} was trained with "
+                f"{resumed_normalisation}; a resumed run keeps its network"
+            )
         continuation = checkpoint.continuation
         for records in ("log.jsonl", "val.jsonl"):
             drop_records_after(args.run_dir / records, start_step)
@@ -376,10 +390,22 @@ def train(args: argparse.Namespace) -> Path:
         network = load_checkpoint(args.init_from).network
         if args.init_time_conditioning is not None:
             network = with_time_conditioning(network, args.init_time_conditioning)
-        log.info("initialised from %s (%s, %s)", args.init_from, network.config.size, network.config.time_conditioning)
+        if args.input_normalisation is not None:
+            network = with_input_normalisation(network, args.input_normalisation)
+        config = network.config
+        log.info(
+            "initialised from %s (%s, %s, %s input normalisation)",
+            args.init_from, config.size, config.time_conditioning, config.input_normalisation,
+        )
     else:
         seed_everything(args.seed)
-        network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
+        network = SuppressionNetwork(
+            NetworkConfig(
+                size=args.size,
+                time_conditioning=args.time_conditioning,
+                input_normalisation=args.input_normalisation or "global",
+            )
+        )
     sampler = StreamSampler(
         paths,
         args.streams,

@@ -12,22 +12,24 @@ from evgate_train.voxel import voxel_grid
 HEIGHT, WIDTH = 48, 96
 
 
-@pytest.fixture(scope="module", params=["half", "full"])
+@pytest.fixture(scope="module", params=[("half", "global"), ("full", "global"), ("half", "local")])
 def exported(tmp_path_factory, request):
-    """(network, session, path, warp resolution): parity holds for either warp resolution."""
+    """(network, session, path, warp resolution): parity holds for either warp resolution and
+    either input normalisation."""
     torch.manual_seed(1)
-    network = SuppressionNetwork(NetworkConfig(size="XS")).eval()
+    warp_resolution, input_normalisation = request.param
+    network = SuppressionNetwork(NetworkConfig(size="XS", input_normalisation=input_normalisation)).eval()
     # Random, non-zero head weights: freshly initialised refinement heads are zero and would
     # leave parts of the graph untested.
     with torch.no_grad():
         for parameter in network.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))
-    path = tmp_path_factory.mktemp("onnx") / f"tiny-{request.param}.onnx"
-    export(network, path, HEIGHT, WIDTH, manifest_sha256="ab" * 32, train_steps=12, warp_resolution=request.param)
+    path = tmp_path_factory.mktemp("onnx") / f"tiny-{warp_resolution}-{input_normalisation}.onnx"
+    export(network, path, HEIGHT, WIDTH, manifest_sha256="ab" * 32, train_steps=12, warp_resolution=warp_resolution)
     options = onnxruntime.SessionOptions()
     options.intra_op_num_threads = 1
     session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-    return network, session, path, request.param
+    return network, session, path, warp_resolution
 
 
 def _compare(network, session, warp_resolution: str, voxel: np.ndarray, horizons: list[float], states=None):

@@ -50,11 +50,15 @@ def test_factorised_attention_equals_per_horizon_copies(variant):
     torch.testing.assert_close(factorised, per_horizon, atol=1e-3, rtol=1e-4)
 
 
-@pytest.mark.parametrize("variant", ["position-aware", "reference", "none"])
+@pytest.mark.parametrize(
+    "variant, input_normalisation",
+    [("position-aware", "global"), ("reference", "global"), ("none", "global"), ("position-aware", "local")],
+)
 @pytest.mark.parametrize("warp_resolution", ["half", "full"])
-def test_export_forward_equals_the_network(variant, warp_resolution):
+def test_export_forward_equals_the_network(variant, input_normalisation, warp_resolution):
     torch.manual_seed(5)
-    network = _perturbed(SuppressionNetwork(NetworkConfig(size="XS", time_conditioning=variant)))
+    config = NetworkConfig(size="XS", time_conditioning=variant, input_normalisation=input_normalisation)
+    network = _perturbed(SuppressionNetwork(config))
     voxel = torch.randn(1, 2, HEIGHT, WIDTH)
     states = [0.5 * torch.randn_like(s) for s in network.initial_states(1, HEIGHT, WIDTH)]
     horizons = torch.tensor([5.0, 40.0, 100.0])

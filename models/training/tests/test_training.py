@@ -236,3 +236,18 @@ def test_init_time_conditioning_fine_tunes_the_switched_network(synthetic_dir, t
 def test_init_time_conditioning_without_init_from_is_refused(synthetic_dir, tmp_path):
     with pytest.raises(TrainingSetupError, match="--init-time-conditioning none: needs --init-from"):
         train(_args(synthetic_dir, tmp_path / "run", 1, "--init-time-conditioning", "none"))
+
+
+def test_input_normalisation_switches_at_init_from_and_stays_on_resume(synthetic_dir, tmp_path):
+    source = tmp_path / "source"
+    train(_args(synthetic_dir, source, 1))
+    assert load_checkpoint(source / "checkpoint.pt").network.config.input_normalisation == "global"
+    run = tmp_path / "local"
+    train(_args(synthetic_dir, run, 2, "--init-from", str(source / "checkpoint.pt"), "--input-normalisation", "local",
+                "--stop-at-step", "1"))
+    assert load_checkpoint(run / "checkpoint.pt").network.config.input_normalisation == "local"
+    # A resume without the flag keeps the checkpoint's network; one naming the other is refused.
+    train(_args(synthetic_dir, run, 2, "--resume"))
+    assert load_checkpoint(run / "checkpoint.pt").network.config.input_normalisation == "local"
+    with pytest.raises(TrainingSetupError, match="--input-normalisation global: .* was trained with local"):
+        train(_args(synthetic_dir, run, 3, "--resume", "--input-normalisation", "global"))
