@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from tqdm import tqdm
 
 from .checkpoint import load_checkpoint, save_checkpoint, with_input_normalisation, with_time_conditioning
@@ -39,6 +40,9 @@ from .streams import StreamSampler, StreamStep, preset_of
 from .input_normalisation import INPUT_NORMALISATIONS
 from .time_conditioning import VARIANTS
 from .windows import SCORED_HORIZON_MS
+
+# The weight average's checkpoint, beside checkpoint.pt in the run folder.
+EMA_FILE = "ema.pt"
 
 log = logging.getLogger("evgate_train.train")
 
@@ -228,6 +232,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="end this process after so many seconds of training (the schedule stays that of --steps); 0 = none",
     )
+    parser.add_argument(
+        "--ema-decay",
+        type=float,
+        default=0.0,
+        help="also keep an exponential moving average of the weights and batch-norm statistics, with this "
+        "decay per step, in run-dir/ema.pt (a checkpoint every tool reads, saved with checkpoint.pt and "
+        "resumed with it); val scores it too, under 'ema'. 0 = off; training itself is unchanged",
+    )
     parser.add_argument("--resume", action="store_true", help="continue from run-dir/checkpoint.pt")
     parser.add_argument(
         "--init-from",
@@ -306,6 +318,22 @@ def train_step(
     return [s.detach() for s in states], sums
 
 
+def weight_average(network: SuppressionNetwork, decay: float, path: Path, start_step: int) -> AveragedModel | None:
+    """The exponential moving average of `network` (None for decay 0), continued from `path` when
+    it holds the resumed step; otherwise it starts from the network's current weights."""
+    if decay == 0:
+        return None
+    average = AveragedModel(network, multi_avg_fn=get_ema_multi_avg_fn(decay), use_buffers=True)
+    if start_step > 0 and path.exists():
+        saved = load_checkpoint(path)
+        if saved.step == start_step:
+            average.module.load_state_dict(saved.network.state_dict())
+            average.n_averaged.fill_(1)  # average from here on; 0 would copy the next weights
+            return average
+        log.warning("%s holds step %d, not the resumed %d: the average starts again", path, saved.step, start_step)
+    return average
+
+
 def validation_scores(network: SuppressionNetwork, sequences: list, seconds: float) -> dict:
     """mIoU, pIoU and R@0.5 of the current mask and of the 100 ms forecast, means over the
     EVIMO-like presets and per preset (evaluation's aggregate)."""
@@ -350,6 +378,8 @@ def train(args: argparse.Namespace) -> Path:
         torch.backends.cudnn.benchmark = True
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
+    if not 0.0 <= args.ema_decay < 1.0:
+        raise TrainingSetupError(f"--ema-decay {args.ema_decay}: must be 0 (off) or in (0, 1)")
     if args.time_budget_s < 0:
         raise TrainingSetupError(f"--time-budget-s {args.time_budget_s}: must be 0 (none) or more")
     if args.init_time_conditioning is not None and (args.init_from is None or args.resume):
@@ -448,6 +478,7 @@ def train(args: argparse.Namespace) -> Path:
             indent=2,
         )
     )
+    average = weight_average(network, args.ema_decay, args.run_dir / EMA_FILE, start_step)
     network.train()
     states = replayed_states(network, sampler, device)
     validation_sequences = [load_sequence(p) for p in validation]
@@ -463,12 +494,17 @@ def train(args: argparse.Namespace) -> Path:
     cursor = sampler.state_dict()
 
     def save(path: Path, step: int) -> None:
+        # The average first: a checkpoint.pt of step N means ema.pt holds step N too.
+        if average is not None:
+            save_checkpoint(args.run_dir / EMA_FILE, average.module, None, step, digest, train_config)
         save_checkpoint(
             path, network, optimiser, step, digest, train_config, {"data": cursor, "random": random_states()}
         )
 
     def validate(step: int) -> None:
         scores = validation_scores(network, validation_sequences, args.val_seconds)
+        if average is not None:
+            scores["ema"] = validation_scores(average.module, validation_sequences, args.val_seconds)
         with open(args.run_dir / "val.jsonl", "a") as val_file:
             val_file.write(json.dumps({"step": step, **scores}) + "\n")
         log.info("val at step %d: %s", step, json.dumps(scores["evimo-like"]))
@@ -493,6 +529,8 @@ def train(args: argparse.Namespace) -> Path:
             states, sums = train_step(
                 network, optimiser, drawn, states, forecast_ramped(weights, step, args.forecast_ramp_steps), args.bf16
             )
+            if average is not None:
+                average.update_parameters(network)
             record = {k: round(float(v.detach()), 5) for k, v in sums.items()}
             record.update(
                 step=step + 1, lr=rate, stream_starts=int(drawn.starts.sum()),

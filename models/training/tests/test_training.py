@@ -251,3 +251,33 @@ def test_input_normalisation_switches_at_init_from_and_stays_on_resume(synthetic
     assert load_checkpoint(run / "checkpoint.pt").network.config.input_normalisation == "local"
     with pytest.raises(TrainingSetupError, match="--input-normalisation global: .* was trained with local"):
         train(_args(synthetic_dir, run, 3, "--resume", "--input-normalisation", "global"))
+
+
+def test_the_weight_average_is_saved_resumed_and_averages(synthetic_dir, tmp_path):
+    run = tmp_path / "run"
+    train(_args(synthetic_dir, run, 2, "--ema-decay", "0.25", "--stop-at-step", "1"))
+    first_raw, first_average = load_checkpoint(run / "checkpoint.pt"), load_checkpoint(run / "ema.pt")
+    assert first_average.step == 1 and first_average.optimiser_state is None
+    # The first update copies the weights it averages.
+    for (name, raw), average in zip(first_raw.network.state_dict().items(), first_average.network.state_dict().values()):
+        assert torch.equal(raw, average), name
+    train(_args(synthetic_dir, run, 2, "--ema-decay", "0.25", "--resume"))
+    second_raw, second_average = load_checkpoint(run / "checkpoint.pt"), load_checkpoint(run / "ema.pt")
+    assert second_average.step == 2
+    moved = 0
+    for name, raw in second_raw.network.named_parameters():
+        expected = 0.25 * first_raw.network.state_dict()[name] + 0.75 * raw.detach()
+        torch.testing.assert_close(second_average.network.state_dict()[name], expected, msg=name)
+        moved += int(not torch.equal(raw.detach(), first_raw.network.state_dict()[name]))
+    assert moved > 0
+
+
+def test_without_a_decay_no_average_is_kept(synthetic_dir, tmp_path):
+    train(_args(synthetic_dir, tmp_path / "run", 1))
+    assert not (tmp_path / "run" / "ema.pt").exists()
+
+
+@pytest.mark.parametrize("decay", ["-0.1", "1.0"])
+def test_an_ema_decay_outside_its_range_is_refused(synthetic_dir, tmp_path, decay):
+    with pytest.raises(TrainingSetupError, match=f"--ema-decay {float(decay)}: must be 0"):
+        train(_args(synthetic_dir, tmp_path / "run", 1, "--ema-decay", decay))
