@@ -32,12 +32,12 @@ from tqdm import tqdm
 
 from .checkpoint import load_checkpoint, save_checkpoint, with_input_normalisation, with_time_conditioning
 from .evaluate import aggregate, evaluate_sequence
-from .network import NetworkConfig, SuppressionNetwork, check_input_size
+from .input_normalisation import INPUT_NORMALISATIONS
 from .jitter import JitterRanges
+from .network import NetworkConfig, SuppressionNetwork, check_input_size
 from .objective import LossWeights, window_objective
 from .sequence import load_sequence
 from .streams import StreamSampler, StreamStep, preset_of
-from .input_normalisation import INPUT_NORMALISATIONS
 from .time_conditioning import VARIANTS
 from .windows import SCORED_HORIZON_MS
 
