@@ -11,17 +11,19 @@
 # input) and a BCE positive weight of 1, each of which beat the recipe without it in a paired
 # run on the final v5 val (mIoU at t + 100 ms +1.4 [0.4, 2.8] and +1.6 [1.1, 2.2]; model card).
 # It keeps an exponential moving average of the weights (decay 0.999) in ema.pt beside the
-# checkpoint, to choose on val between the averaged and the last weights.
+# checkpoint, to choose on val between the averaged and the last weights. The shipped S is
+# S-v5c-jitter-pos1 at the end of its 4000-step schedule; STEPS=N continues it on the cosine
+# schedule of N steps (the rate jumps to where that schedule stands at step 4000).
 #
-# Environment: RUN (S-v5c-jitter-pos1), INIT_FROM (../campaign/S-v5b/checkpoint.pt, relative to
-# models/training: S-v5b, trained on the draw of v5 before the final one; empty: random weights),
-# STEPS (4000: the schedule's length), STOP_AT (0: run to STEPS), THREADS (1). Extra arguments
-# go to evgate_train.train.
+# Environment: RUN (S-v5c-jitter-pos1), INIT_FROM (../campaign/S-v5c-jitter-pos1/checkpoint.pt,
+# relative to models/training: the shipped S, for a new RUN; empty: random weights), STEPS
+# (4000: the schedule's length), STOP_AT (0: run to STEPS), THREADS (1). Extra arguments go to
+# evgate_train.train.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
 run=${RUN:-S-v5c-jitter-pos1}
-init_from=${INIT_FROM-../campaign/S-v5b/checkpoint.pt}
+init_from=${INIT_FROM-../campaign/S-v5c-jitter-pos1/checkpoint.pt}
 evgate=$root/target/release/evgate
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
     "$evgate" sim suite --out "$root/data/suite-v5-full" --scale full --splits train
