@@ -10,6 +10,10 @@ of (t, t + 50 ms]: an event at t + d takes the mask whose interval holds d (the 
 rule). An event is a true positive when kept and labelled as a moving object (events_label > 0).
 Writes the F1 curve over thresholds, the best threshold and the figures at 0 as JSON; pass the
 threshold to `evgate_train.export --threshold-logit`.
+
+`--dilations 0,1,2` also measures each forecast mask dilated by r pixels (a maximum of the
+logits over the (2r + 1)-pixel square around each pixel) before the lookup, and reports the best
+threshold per radius. evgate-gate applies no dilation: this measures what one would buy.
 """
 
 import argparse
@@ -20,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from tqdm import tqdm
 
 from .onnx_network import load_export
@@ -55,14 +60,22 @@ def sequence_size(path: Path) -> tuple[int, int]:
     return width, height
 
 
-def event_logits(network, path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(logit, is a moving object) of every event judged by a forecast of the sequence."""
+def dilated(mask_logits: torch.Tensor, radius: int) -> torch.Tensor:
+    """[K, H, W] logits, each the maximum over the (2 radius + 1)-pixel square around it."""
+    if radius == 0:
+        return mask_logits
+    return F.max_pool2d(mask_logits[None], 2 * radius + 1, stride=1, padding=radius)[0]
+
+
+def event_logits(network, path: Path, radii: tuple[int, ...] = (0,)) -> tuple[dict[int, np.ndarray], np.ndarray]:
+    """Per dilation radius, the logit of every event judged by a forecast of the sequence; and
+    whether each event is a moving object."""
     sequence = load_sequence(path)
     if sequence.events_label is None:
         raise CalibrationError(f"{path}: no events_label array; calibration needs labelled events")
     states = network.initial_states(1, *network.input_size)
     horizons = torch.tensor([SERVICE_HORIZONS_MS], dtype=torch.float32)
-    logits, positives = [], []
+    logits, positives = {radius: [] for radius in radii}, []
     for reference in sequence.ref_ts:
         t_end = int(reference)
         window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
@@ -74,11 +87,12 @@ def event_logits(network, path: Path) -> tuple[np.ndarray, np.ndarray]:
         states = out.states
         following = sequence.event_range(t_end + 1, t_end + WINDOW_US + 1)
         d_us = sequence.events_t[following] - t_end
-        masks = out.future_mask_logits[0].numpy()
         index = mask_index(d_us, SERVICE_HORIZONS_MS)
-        logits.append(masks[index, sequence.events_y[following], sequence.events_x[following]])
+        for radius in radii:
+            masks = dilated(out.future_mask_logits[0], radius).numpy()
+            logits[radius].append(masks[index, sequence.events_y[following], sequence.events_x[following]])
         positives.append(sequence.events_label[following] > 0)
-    return np.concatenate(logits), np.concatenate(positives)
+    return {radius: np.concatenate(values) for radius, values in logits.items()}, np.concatenate(positives)
 
 
 def f1_curve(logits: np.ndarray, positives: np.ndarray, thresholds: np.ndarray) -> list[dict]:
@@ -108,14 +122,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", type=Path, required=True, help="validation .npz sequences (searched recursively)")
     parser.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads")
     parser.add_argument("--output", type=Path, required=True, help="JSON report path")
+    parser.add_argument(
+        "--dilations",
+        default="0",
+        help="comma-separated dilation radii in pixels to measure besides 0 (the mask as the gate uses it)",
+    )
     args = parser.parse_args(argv)
+    radii = parse_radii(args.dilations)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     paths = sorted(args.data.rglob("*.npz"))
     if not paths:
         raise CalibrationError(f"{args.data}: no .npz sequences found")
     network = load_export(args.model, args.threads).network
     height, width = network.input_size
-    logits, positives, skipped = [], [], []
+    logits, positives, skipped = {radius: [] for radius in radii}, [], []
     for path in tqdm(paths, desc="calibrate", unit="seq"):
         size = sequence_size(path)
         if padded(size[0]) != width or padded(size[1]) != height:
@@ -124,28 +144,39 @@ def main(argv: list[str] | None = None) -> int:
             skipped.append(str(path))
             continue
         try:
-            sequence_logits, sequence_positives = event_logits(network, path)
+            sequence_logits, sequence_positives = event_logits(network, path, radii)
         except SequenceFormatError as error:
             raise CalibrationError(str(error)) from error
-        logits.append(sequence_logits)
+        for radius in radii:
+            logits[radius].append(sequence_logits[radius])
         positives.append(sequence_positives)
-    if not logits:
+    if not positives:
         raise CalibrationError(f"{args.data}: no sequence pads to the export's {width}x{height} input")
-    all_logits, all_positives = np.concatenate(logits), np.concatenate(positives)
-    curve = f1_curve(all_logits, all_positives, THRESHOLDS)
-    best = max(curve, key=lambda row: row["f1"])
-    at_zero = next(row for row in curve if row["threshold-logit"] == 0.0)
+    all_positives = np.concatenate(positives)
+    by_radius = {}
+    for radius in radii:
+        radius_curve = f1_curve(np.concatenate(logits.pop(radius)), all_positives, THRESHOLDS)
+        by_radius[radius] = {
+            "curve": radius_curve,
+            "best": max(radius_curve, key=lambda row: row["f1"]),
+            "at-zero": next(row for row in radius_curve if row["threshold-logit"] == 0.0),
+        }
+    curve, best, at_zero = by_radius[0]["curve"], by_radius[0]["best"], by_radius[0]["at-zero"]
     report = {
         "model": str(args.model),
         "data": str(args.data),
         "sequences": [str(p) for p in paths if str(p) not in skipped],
         "left-out": skipped,
-        "events": int(len(all_logits)),
+        "events": int(len(all_positives)),
         "moving-object-events": int(all_positives.sum()),
         "horizons-ms": list(SERVICE_HORIZONS_MS),
         "best": best,
         "at-zero": at_zero,
         "curve": curve,
+        "dilations": [
+            {"dilation-px": radius, "best": entry["best"], "at-zero": entry["at-zero"]}
+            for radius, entry in by_radius.items()
+        ],
     }
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(report, indent=2))
@@ -153,7 +184,25 @@ def main(argv: list[str] | None = None) -> int:
         f"best threshold-logit {best['threshold-logit']:+.2f}: F1 {best['f1']:.3f} (P {best['precision']:.3f}, "
         f"R {best['recall']:.3f}); at 0: F1 {at_zero['f1']:.3f}"
     )
+    for radius, entry in by_radius.items():
+        if radius != 0:
+            row = entry["best"]
+            print(
+                f"dilated {radius} px: best threshold-logit {row['threshold-logit']:+.2f}: F1 {row['f1']:.3f} "
+                f"(P {row['precision']:.3f}, R {row['recall']:.3f})"
+            )
     return 0
+
+
+def parse_radii(text: str) -> tuple[int, ...]:
+    try:
+        radii = tuple(int(part) for part in text.split(","))
+    except ValueError as error:
+        raise CalibrationError(f"--dilations {text!r}: expected comma-separated whole pixels, e.g. 0,1,2") from error
+    if not radii or min(radii) < 0 or len(set(radii)) != len(radii):
+        raise CalibrationError(f"--dilations {text!r}: radii must be distinct and at least 0, e.g. 0,1,2")
+    # The undilated mask is what the gate uses: always measured, and reported at the top level.
+    return (0, *(radius for radius in radii if radius != 0))
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from evgate_train.calibrate import CalibrationError, f1_curve, main, mask_index
+from evgate_train.calibrate import CalibrationError, dilated, f1_curve, main, mask_index, parse_radii
 from evgate_train.export import export
 from evgate_train.network import NetworkConfig, SuppressionNetwork
 from evgate_train.onnx_network import load_export
@@ -46,3 +46,32 @@ def test_calibration_reports_the_best_threshold_of_an_export(synthetic_dir, tmp_
 def test_calibration_needs_labelled_events(tmp_path):
     with pytest.raises(CalibrationError, match="no .npz sequences"):
         main(["--model", "x.onnx", "--data", str(tmp_path), "--output", str(tmp_path / "c.json")])
+
+
+def test_a_dilated_mask_takes_the_largest_logit_of_its_square():
+    logits = torch.full((2, 5, 5), -4.0)
+    logits[0, 2, 2] = 3.0
+    grown = dilated(logits, 1)
+    assert torch.equal(dilated(logits, 0), logits)
+    assert (grown[0, 1:4, 1:4] == 3.0).all() and grown[0].sum() == 9 * 3.0 - 16 * 4.0
+    assert (grown[1] == -4.0).all()
+
+
+def test_calibration_reports_each_dilation(synthetic_dir, tmp_path):
+    torch.manual_seed(3)
+    exported = tmp_path / "xs.onnx"
+    export(SuppressionNetwork(NetworkConfig(size="XS")).eval(), exported, 48, 96, "cd" * 32, 1)
+    report_path = tmp_path / "calibration.json"
+    main(["--model", str(exported), "--data", str(synthetic_dir), "--output", str(report_path), "--dilations", "2"])
+    report = json.loads(report_path.read_text())
+    by_radius = {entry["dilation-px"]: entry for entry in report["dilations"]}
+    assert sorted(by_radius) == [0, 2]
+    assert by_radius[0]["at-zero"] == report["at-zero"]
+    # A larger mask keeps every event the undilated one keeps.
+    assert by_radius[2]["at-zero"]["kept"] >= by_radius[0]["at-zero"]["kept"]
+
+
+@pytest.mark.parametrize("text", ["1,x", "-1", "1,1", ""])
+def test_dilations_must_be_distinct_whole_pixels(text):
+    with pytest.raises(CalibrationError, match="--dilations"):
+        parse_radii(text)
