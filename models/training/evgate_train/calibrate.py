@@ -180,18 +180,18 @@ def main(argv: list[str] | None = None) -> int:
     }
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(report, indent=2))
-    print(
-        f"best threshold-logit {best['threshold-logit']:+.2f}: F1 {best['f1']:.3f} (P {best['precision']:.3f}, "
-        f"R {best['recall']:.3f}); at 0: F1 {at_zero['f1']:.3f}"
-    )
+    print(f"best {summary(best)}; at 0: F1 {at_zero['f1']:.3f}")
     for radius, entry in by_radius.items():
         if radius != 0:
-            row = entry["best"]
-            print(
-                f"dilated {radius} px: best threshold-logit {row['threshold-logit']:+.2f}: F1 {row['f1']:.3f} "
-                f"(P {row['precision']:.3f}, R {row['recall']:.3f})"
-            )
+            print(f"dilated {radius} px: best {summary(entry['best'])}")
     return 0
+
+
+def summary(row: dict) -> str:
+    return (
+        f"threshold-logit {row['threshold-logit']:+.2f}: F1 {row['f1']:.3f} "
+        f"(P {row['precision']:.3f}, R {row['recall']:.3f})"
+    )
 
 
 def parse_radii(text: str) -> tuple[int, ...]:
