@@ -1,6 +1,7 @@
 //! Inference latency of an exported network, window after window with the recurrent state
 //! carried, as the infer service runs it: voxelisation, the ONNX Runtime call, thresholding of
-//! the current and horizon masks, and the prediction age (horizon − runtime) they leave.
+//! the current and horizon masks and of the keep regions (the horizons' logits dilated by the
+//! model's keep rule), and the prediction age (horizon − runtime) they leave.
 //!
 //! A bench binary rather than criterion because the figures wanted are a median and a p99 per
 //! stage, written as JSON. Settings come from the environment:
@@ -23,9 +24,11 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
-use evgate_core::{BitMask, Event, SensorSize, TimeSpan, VoxelGrid};
+use evgate_core::{
+    dilate_logits, BitMask, DilationScratch, Event, SensorSize, TimeSpan, VoxelGrid,
+};
 use evgate_ipc::MAX_HORIZONS;
-use evgate_model::{ModelRuntime, Provider, RuntimeOptions, StateBinding};
+use evgate_model::{MaskRule, ModelRuntime, Provider, RuntimeOptions, StateBinding};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -227,6 +230,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut grid = VoxelGrid::new(sensor, metadata.bins as usize)?;
     let mut mask = BitMask::new(sensor)?;
     let row_stride = usize::from(input.width);
+    // The model's own mask rule, as the service applies it (evgate_model::Forecaster, keep
+    // regions only): the current mask, then each horizon's forecast mask, or its keep region
+    // where the rule dilates.
+    let rule = MaskRule::of(&metadata);
+    let (mut dilation_scratch, mut dilated) = (DilationScratch::default(), Vec::new());
     let mut voxelisation = Vec::with_capacity(windows);
     let mut inference = Vec::with_capacity(windows);
     let mut inference_cpu = Vec::with_capacity(windows);
@@ -256,9 +264,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let inference_time = output.inference_time();
 
         let started = Instant::now();
-        mask.fill_from_logits(output.mask_logits(), row_stride, 0.0)?;
+        mask.fill_from_logits(output.mask_logits(), row_stride, rule.threshold_logit)?;
         for logits in output.future_mask_logits() {
-            mask.fill_from_logits(logits, row_stride, 0.0)?;
+            if rule.keeps_the_forecast() {
+                mask.fill_from_logits(logits, row_stride, rule.threshold_logit)?;
+            } else {
+                dilate_logits(
+                    logits,
+                    row_stride,
+                    output.height(),
+                    usize::from(rule.keep_dilation_px),
+                    &mut dilation_scratch,
+                    &mut dilated,
+                );
+                mask.fill_from_logits(&dilated, row_stride, rule.keep_threshold_logit)?;
+            }
         }
         let threshold_time = started.elapsed();
         drop(output);

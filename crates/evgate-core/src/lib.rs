@@ -2,6 +2,7 @@
 //! hands in.
 
 pub mod bitset;
+pub mod dilation;
 pub mod event;
 pub mod gate;
 pub mod geometry;
@@ -11,6 +12,7 @@ pub mod voxel;
 pub mod window;
 
 pub use bitset::words_for;
+pub use dilation::{dilate_logits, dilate_mask, DilationScratch};
 pub use event::{is_event_time, Event, Polarity, MAX_EVENT_TIME_US};
 pub use gate::{ForecastView, GateCounts, GateError, GateMode};
 pub use geometry::SensorSize;

@@ -83,7 +83,7 @@ pub enum HarnessError {
 /// A loaded network and the name it is reported under.
 pub struct LoadedModel {
     pub label: String,
-    /// The network with the model's own threshold, unbinned: what `evgate-infer` runs.
+    /// The network with the model's own mask rule, unbinned: what `evgate-infer` runs.
     pub forecaster: Forecaster,
 }
 
@@ -136,11 +136,13 @@ impl Evaluation {
     /// baselines start from the ground-truth mask at the reference time.
     pub fn new(config: EvalConfig, models: Vec<LoadedModel>) -> Result<Self, HarnessError> {
         config.validate()?;
-        let source = models.first().map(|m| m.label.clone());
+        let source = models
+            .first()
+            .map(|m| (m.label.as_str(), m.forecaster.rule().keep_dilation_px));
         let mut methods = vec![
             MethodInfo::oms(config.oms),
-            MethodInfo::no_forecast(source.as_deref()),
-            MethodInfo::linear(&config, source.as_deref()),
+            MethodInfo::no_forecast(source),
+            MethodInfo::linear(&config, source),
         ];
         for (index, model) in models.iter().enumerate() {
             let runtime = model.forecaster.runtime();
@@ -149,6 +151,7 @@ impl Evaluation {
                 &model.label,
                 runtime.model_path(),
                 runtime.metadata(),
+                model.forecaster.rule(),
                 &config,
             );
             if let Some(info) = method.model.as_mut() {
@@ -308,6 +311,11 @@ impl Evaluation {
                 horizons_us: &horizons_us,
                 window,
                 current: current_source.as_ref(),
+                baseline_dilation_px: if model_outputs.is_empty() {
+                    0
+                } else {
+                    self.models[0].forecaster.rule().keep_dilation_px
+                },
                 previous: previous_current.as_ref(),
                 models: &model_outputs,
                 truth_now: now,
@@ -349,7 +357,7 @@ impl Evaluation {
                         reference_us,
                         &gating_horizons,
                         &horizons_us,
-                        &output.futures,
+                        output.keep_regions(),
                         size,
                     )
                     .map_err(|error| error.at(name, reference_us))?;
@@ -496,6 +504,7 @@ impl Evaluation {
                 continue;
             }
             let path = model.forecaster.runtime().model_path().to_path_buf();
+            let keeps_the_forecast = model.forecaster.rule().keeps_the_forecast();
             let forecast = model
                 .forecaster
                 .forecast(size, window, span, horizons_ms)
@@ -503,13 +512,13 @@ impl Evaluation {
                     path,
                     source: Box::new(source),
                 })?;
+            let to_bools = |masks: &[evgate_core::BitMask]| -> Vec<Vec<bool>> {
+                masks.iter().map(|mask| mask.view().to_bools()).collect()
+            };
             model_outputs.push(Some(MethodOutput {
                 current: forecast.current.view().to_bools(),
-                futures: forecast
-                    .futures
-                    .iter()
-                    .map(|mask| mask.view().to_bools())
-                    .collect(),
+                futures: to_bools(forecast.futures),
+                keep: (!keeps_the_forecast).then(|| to_bools(forecast.keep)),
                 runtime: forecast.inference,
             }));
         }

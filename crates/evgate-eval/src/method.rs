@@ -1,7 +1,7 @@
 //! The methods a run compares and how the report names and describes them.
 
 use evgate_core::SensorSize;
-use evgate_model::ModelMetadata;
+use evgate_model::{MaskRule, ModelMetadata};
 use serde::{Deserialize, Serialize};
 
 use crate::config::EvalConfig;
@@ -46,6 +46,13 @@ pub struct ModelInfo {
     /// The FLOP table the GFLOPs come from (only when its row has this parameter count).
     #[serde(default)]
     pub size_figures_from: Option<std::path::PathBuf>,
+    /// The mask rule the run applied (reports written before these fields had 0, 0 and 0).
+    #[serde(default)]
+    pub threshold_logit: f32,
+    #[serde(default)]
+    pub keep_threshold_logit: f32,
+    #[serde(default)]
+    pub keep_dilation_px: u16,
 }
 
 /// Reports written before the field existed only held trained models.
@@ -97,14 +104,15 @@ impl MethodInfo {
         }
     }
 
-    /// `current_source` names the model whose current mask is held (`None`: the ground truth).
-    pub fn no_forecast(current_source: Option<&str>) -> Self {
+    /// `current_source`: the model whose current mask is held and its forecast dilation
+    /// (`None`: the ground truth).
+    pub fn no_forecast(current_source: Option<(&str, u16)>) -> Self {
         let description = format!("{}, used for every horizon", source(current_source));
         Self::baseline("no-forecast", description, MethodKind::NoForecast, 0.0)
     }
 
-    /// `current_source` names the model whose current mask is extrapolated.
-    pub fn linear(config: &EvalConfig, current_source: Option<&str>) -> Self {
+    /// `current_source`: the model whose current mask is extrapolated and its forecast dilation.
+    pub fn linear(config: &EvalConfig, current_source: Option<(&str, u16)>) -> Self {
         let description = format!(
             "{}, components shifted by their centroid velocity over the last window",
             source(current_source)
@@ -124,6 +132,7 @@ impl MethodInfo {
         label: &str,
         path: &std::path::Path,
         metadata: &ModelMetadata,
+        rule: MaskRule,
         config: &EvalConfig,
     ) -> Self {
         let atc = serde_json::to_value(metadata.atc)
@@ -134,14 +143,16 @@ impl MethodInfo {
             name: format!("model:{label}"),
             description: format!(
                 "network {label} (size {}, ATC {atc}, {} training steps{}), future masks by flow \
-                 warping",
+                 warping, threshold logit {}{}",
                 metadata.model_size.label(),
                 metadata.train_steps,
                 if metadata.train_manifest_sha256.is_none() {
                     ", untrained weights"
                 } else {
                     ""
-                }
+                },
+                rule.threshold_logit,
+                keep_rule(rule),
             ),
             kind: MethodKind::Model(index),
             forecast_horizon_ms: f64::from(config.headline_horizon_ms),
@@ -156,14 +167,31 @@ impl MethodInfo {
                 path: Some(path.to_path_buf()),
                 parameters: None,
                 size_figures_from: None,
+                threshold_logit: rule.threshold_logit,
+                keep_threshold_logit: rule.keep_threshold_logit,
+                keep_dilation_px: rule.keep_dilation_px,
             }),
         }
     }
 }
 
-fn source(current_source: Option<&str>) -> String {
+fn source(current_source: Option<(&str, u16)>) -> String {
     current_source.map_or_else(
         || "the ground-truth mask at t".to_owned(),
-        |model| format!("the current mask of {model}"),
+        |(model, dilation_px)| match dilation_px {
+            0 => format!("the current mask of {model}"),
+            px => format!("the current mask of {model} (kept regions dilated by {px} px)"),
+        },
     )
+}
+
+fn keep_rule(rule: MaskRule) -> String {
+    if rule.keeps_the_forecast() {
+        String::new()
+    } else {
+        format!(
+            "; keeps events in the forecasts dilated by {} px above logit {}",
+            rule.keep_dilation_px, rule.keep_threshold_logit
+        )
+    }
 }

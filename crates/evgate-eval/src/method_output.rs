@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use evgate_core::{Event, SensorSize};
+use evgate_core::{dilate_mask, DilationScratch, Event, SensorSize};
 
 use crate::config::EvalConfig;
 use crate::linear::extrapolate;
@@ -14,7 +14,16 @@ use crate::oms::oms_mask;
 pub(crate) struct MethodOutput {
     pub current: Vec<bool>,
     pub futures: Vec<Vec<bool>>,
+    /// The pixels whose events the gate keeps at each horizon, where they are not `futures`.
+    pub keep: Option<Vec<Vec<bool>>>,
     pub runtime: Duration,
+}
+
+impl MethodOutput {
+    /// One keep region per horizon.
+    pub fn keep_regions(&self) -> &[Vec<bool>] {
+        self.keep.as_deref().unwrap_or(&self.futures)
+    }
 }
 
 /// Everything a method may look at for one reference time.
@@ -28,6 +37,10 @@ pub(crate) struct ReferenceInputs<'a> {
     /// What the baselines start from: the first model's current mask, or the true mask when
     /// no model runs, with what it cost.
     pub current: Option<&'a (Vec<bool>, Duration)>,
+    /// The first model's keep dilation, by which the baselines built on its current mask dilate
+    /// their forecasts into keep regions too, so that their gating compares with the model's
+    /// on motion alone (0 without a model).
+    pub baseline_dilation_px: u16,
     /// The previous reference time's current mask, for linear extrapolation.
     pub previous: Option<&'a (i64, Vec<bool>)>,
     /// Each model's output (None where the model sits the recording out).
@@ -35,6 +48,32 @@ pub(crate) struct ReferenceInputs<'a> {
     /// The true object ids at the reference time and at each horizon, where known.
     pub truth_now: Option<&'a [u8]>,
     pub truth_at_horizon: &'a [Option<&'a [u8]>],
+}
+
+impl ReferenceInputs<'_> {
+    /// A baseline's keep regions: its forecasts dilated as the model's are (`None`: no dilation).
+    fn keep_regions(&self, futures: &[Vec<bool>]) -> Option<Vec<Vec<bool>>> {
+        if self.baseline_dilation_px == 0 {
+            return None;
+        }
+        let mut scratch = DilationScratch::default();
+        let regions = futures
+            .iter()
+            .map(|future| {
+                let mut region = Vec::new();
+                dilate_mask(
+                    future,
+                    usize::from(self.size.width),
+                    usize::from(self.size.height),
+                    usize::from(self.baseline_dilation_px),
+                    &mut scratch,
+                    &mut region,
+                );
+                region
+            })
+            .collect();
+        Some(regions)
+    }
 }
 
 /// Object ids as a moving / static mask.
@@ -53,13 +92,19 @@ impl MethodKind {
                 Some(MethodOutput {
                     futures: vec![mask.clone(); horizons],
                     current: mask,
+                    keep: None,
                     runtime: started.elapsed(),
                 })
             }
-            MethodKind::NoForecast => inputs.current.map(|(current, runtime)| MethodOutput {
-                futures: vec![current.clone(); horizons],
-                current: current.clone(),
-                runtime: *runtime,
+            MethodKind::NoForecast => inputs.current.map(|(current, runtime)| {
+                let started = Instant::now();
+                let futures = vec![current.clone(); horizons];
+                MethodOutput {
+                    keep: inputs.keep_regions(&futures),
+                    futures,
+                    current: current.clone(),
+                    runtime: *runtime + started.elapsed(),
+                }
             }),
             MethodKind::Linear => inputs.current.map(|(current, runtime)| {
                 let started = Instant::now();
@@ -75,6 +120,7 @@ impl MethodKind {
                     inputs.config.linear_max_match_distance_px,
                 );
                 MethodOutput {
+                    keep: inputs.keep_regions(&futures),
                     futures,
                     current: current.clone(),
                     runtime: *runtime + started.elapsed(),
@@ -83,6 +129,7 @@ impl MethodKind {
             MethodKind::Model(index) => inputs.models[index].as_ref().map(|output| MethodOutput {
                 current: output.current.clone(),
                 futures: output.futures.clone(),
+                keep: output.keep.clone(),
                 runtime: output.runtime,
             }),
             MethodKind::Oracle => inputs.truth_now.map(|now| MethodOutput {
@@ -92,8 +139,66 @@ impl MethodKind {
                     .iter()
                     .map(|truth| truth.map_or_else(|| vec![false; inputs.size.pixels()], to_mask))
                     .collect(),
+                keep: None,
                 runtime: Duration::ZERO,
             }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::*;
+
+    fn set_pixels(mask: &[bool], size: SensorSize) -> Vec<(usize, usize)> {
+        let width = usize::from(size.width);
+        (0..mask.len())
+            .filter(|&i| mask[i])
+            .map(|i| (i % width, i / width))
+            .collect()
+    }
+
+    #[test]
+    fn baselines_on_the_model_mask_keep_their_forecasts_dilated_as_the_model_does() {
+        let size = SensorSize::new(8, 6);
+        let config = EvalConfig::default();
+        let mut current = vec![false; size.pixels()];
+        current[2 * 8 + 4] = true;
+        let current = (current, Duration::ZERO);
+        let horizons_us = [50_000, 100_000];
+        let inputs_with = |baseline_dilation_px| ReferenceInputs {
+            config: &config,
+            size,
+            reference_us: 50_000,
+            horizons_us: &horizons_us,
+            window: &[],
+            current: Some(&current),
+            baseline_dilation_px,
+            previous: None,
+            models: &[],
+            truth_now: None,
+            truth_at_horizon: &[None, None],
+        };
+        let square: Vec<(usize, usize)> =
+            (1..4).flat_map(|y| (3..6).map(move |x| (x, y))).collect();
+        for kind in [MethodKind::NoForecast, MethodKind::Linear] {
+            let plain = kind.output(&inputs_with(0)).unwrap();
+            let dilated = kind.output(&inputs_with(1)).unwrap();
+            assert_eq!(
+                dilated.current, current.0,
+                "{kind:?}: the current mask changed"
+            );
+            assert_eq!(
+                dilated.futures, plain.futures,
+                "{kind:?}: the forecasts changed"
+            );
+            assert_eq!(plain.keep_regions(), plain.futures.as_slice(), "{kind:?}");
+            for (future, region) in plain.futures.iter().zip(dilated.keep_regions()) {
+                assert_eq!(set_pixels(future, size), vec![(4, 2)], "{kind:?}");
+                assert_eq!(set_pixels(region, size), square, "{kind:?}");
+            }
         }
     }
 }

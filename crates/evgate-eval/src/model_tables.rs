@@ -255,6 +255,9 @@ mod tests {
                     path: None,
                     parameters: None,
                     size_figures_from: None,
+                    threshold_logit: 0.0,
+                    keep_threshold_logit: 0.0,
+                    keep_dilation_px: 0,
                 }),
             };
             let scores = report.overall["linear"].clone();

@@ -1,13 +1,48 @@
 //! From a window of events to forecast masks, the one way `evgate-infer` and `evgate eval` both
 //! take: voxelise the window (binned `downsample`×`downsample` when asked), pad it into the
-//! model's input, run the network with its carried state, and threshold the current and future
-//! mask logits at the model's threshold into full-resolution bit masks.
+//! model's input, run the network with its carried state, threshold the current and future
+//! mask logits at the model's threshold into full-resolution bit masks, and derive each
+//! horizon's keep region (the events the gate keeps) by the model's keep rule.
 
 use std::time::{Duration, Instant};
 
-use evgate_core::{BitMask, Event, MaskError, SensorSize, TimeSpan, VoxelError, VoxelGrid};
+use evgate_core::{
+    dilate_logits, BitMask, DilationScratch, Event, MaskError, SensorSize, TimeSpan, VoxelError,
+    VoxelGrid,
+};
 
+use crate::metadata::ModelMetadata;
 use crate::runtime::{ModelError, ModelRuntime};
+
+/// How mask logits become bit masks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MaskRule {
+    /// Above it a pixel of the current or a forecast mask is moving.
+    pub threshold_logit: f32,
+    /// Above it a pixel of a dilated forecast is in the keep region.
+    pub keep_threshold_logit: f32,
+    /// A keep region takes, at each model pixel, the maximum of the forecast logits over the
+    /// (2r + 1)-pixel square around it before its threshold, so that the gate keeps the events
+    /// just outside a forecast that lags or undershoots the object.
+    pub keep_dilation_px: u16,
+}
+
+impl MaskRule {
+    /// The rule the model's metadata declares (`evgate.threshold-logit`,
+    /// `evgate.keep-threshold-logit`, `evgate.keep-dilation-px`).
+    pub fn of(metadata: &ModelMetadata) -> Self {
+        Self {
+            threshold_logit: metadata.threshold_logit,
+            keep_threshold_logit: metadata.keep_threshold_logit,
+            keep_dilation_px: metadata.keep_dilation_px,
+        }
+    }
+
+    /// Whether keep regions are the forecast masks themselves.
+    pub fn keeps_the_forecast(&self) -> bool {
+        self.keep_dilation_px == 0 && self.keep_threshold_logit == self.threshold_logit
+    }
+}
 
 /// Why a window could not be forecast.
 #[derive(Debug, thiserror::Error)]
@@ -32,8 +67,11 @@ pub enum ForecastError {
 pub struct Forecast<'a> {
     /// The mask at the window's end.
     pub current: &'a BitMask,
-    /// One mask per requested horizon, in order.
+    /// One mask per requested horizon, in order; empty from a forecaster made
+    /// [`Forecaster::keep_regions_only`] whose rule dilates.
     pub futures: &'a [BitMask],
+    /// One keep region per horizon: the pixels whose events the gate keeps.
+    pub keep: &'a [BitMask],
     pub voxelisation: Duration,
     pub inference: Duration,
     pub thresholding: Duration,
@@ -48,33 +86,51 @@ impl Forecast<'_> {
 
 pub struct Forecaster {
     runtime: ModelRuntime,
-    threshold_logit: f32,
+    rule: MaskRule,
     downsample: u16,
+    /// Whether the forecast masks are thresholded where the keep regions are not them.
+    forecast_masks: bool,
     grid: Option<VoxelGrid>,
-    /// The current mask, then one per horizon.
+    /// The current mask, then one per horizon (the current mask alone without `forecast_masks`).
     masks: Vec<BitMask>,
+    /// One keep region per horizon, where the rule does not keep the forecast itself.
+    keep: Vec<BitMask>,
+    /// One dilated logit plane (the dilation's own buffers are in `dilation_scratch`).
+    dilated: Vec<f32>,
+    dilation_scratch: DilationScratch<f32>,
 }
 
 impl Forecaster {
-    /// `threshold_logit`: above it a pixel is moving (the model's own is
-    /// `runtime.metadata().threshold_logit`); `downsample`: the side of the square of sensor
-    /// pixels one input cell bins (1: none).
-    pub fn new(runtime: ModelRuntime, threshold_logit: f32, downsample: u16) -> Self {
+    /// `rule`: how logits become masks (the model's own is [`MaskRule::of`] its metadata);
+    /// `downsample`: the side of the square of sensor pixels one input cell bins (1: none).
+    pub fn new(runtime: ModelRuntime, rule: MaskRule, downsample: u16) -> Self {
         Self {
             runtime,
-            threshold_logit,
+            rule,
             downsample,
+            forecast_masks: true,
             grid: None,
             masks: Vec::new(),
+            keep: Vec::new(),
+            dilated: Vec::new(),
+            dilation_scratch: DilationScratch::default(),
         }
+    }
+
+    /// Thresholds only the current mask and the keep regions, for a consumer that gates and
+    /// never scores the forecast masks (the infer service): the masks would cost a second pass
+    /// over every horizon's logits.
+    pub fn keep_regions_only(mut self) -> Self {
+        self.forecast_masks = false;
+        self
     }
 
     pub fn runtime(&self) -> &ModelRuntime {
         &self.runtime
     }
 
-    pub fn threshold_logit(&self) -> f32 {
-        self.threshold_logit
+    pub fn rule(&self) -> MaskRule {
+        self.rule
     }
 
     /// Forgets the recurrent state: the next window starts a new stream.
@@ -112,25 +168,63 @@ impl Forecaster {
 
         let started = Instant::now();
         let mask_error = |source| ForecastError::Mask { sensor, source };
-        if self.masks.len() != 1 + output.horizon_count()
-            || self.masks.first().map(BitMask::size) != Some(sensor)
-        {
-            self.masks = (0..=output.horizon_count())
+        let keeps_the_forecast = self.rule.keeps_the_forecast();
+        let mask_count = if self.forecast_masks || keeps_the_forecast {
+            1 + output.horizon_count()
+        } else {
+            1
+        };
+        if self.masks.len() != mask_count || self.masks.first().map(BitMask::size) != Some(sensor) {
+            self.masks = (0..mask_count)
                 .map(|_| BitMask::new(sensor))
                 .collect::<Result<_, _>>()
                 .map_err(mask_error)?;
         }
-        let row_stride = output.width();
+        let (row_stride, height) = (output.width(), output.height());
+        let (rule, downsample) = (self.rule, self.downsample);
         let logits = std::iter::once(output.mask_logits()).chain(output.future_mask_logits());
         for (mask, logits) in self.masks.iter_mut().zip(logits) {
-            mask.fill_from_binned_logits(logits, row_stride, self.threshold_logit, self.downsample)
+            mask.fill_from_binned_logits(logits, row_stride, rule.threshold_logit, downsample)
                 .map_err(mask_error)?;
+        }
+        if keeps_the_forecast {
+            self.keep.clear();
+        } else {
+            self.keep.resize_with(output.horizon_count(), || {
+                BitMask::new(sensor).expect("the masks above have this size")
+            });
+            for (region, logits) in self.keep.iter_mut().zip(output.future_mask_logits()) {
+                if region.size() != sensor {
+                    *region = BitMask::new(sensor).map_err(mask_error)?;
+                }
+                dilate_logits(
+                    logits,
+                    row_stride,
+                    height,
+                    usize::from(rule.keep_dilation_px),
+                    &mut self.dilation_scratch,
+                    &mut self.dilated,
+                );
+                region
+                    .fill_from_binned_logits(
+                        &self.dilated,
+                        row_stride,
+                        rule.keep_threshold_logit,
+                        downsample,
+                    )
+                    .map_err(mask_error)?;
+            }
         }
         let thresholding = started.elapsed();
         let (current, futures) = self.masks.split_first().expect("1 + K masks");
         Ok(Forecast {
             current,
             futures,
+            keep: if self.keep.is_empty() {
+                futures
+            } else {
+                &self.keep
+            },
             voxelisation,
             inference,
             thresholding,

@@ -15,7 +15,7 @@ pub mod runtime;
 pub mod state;
 pub mod trusted_path;
 
-pub use forecaster::{Forecast, ForecastError, Forecaster};
+pub use forecaster::{Forecast, ForecastError, Forecaster, MaskRule};
 pub use library::{locate_onnxruntime, LibraryError};
 pub use metadata::{AtcVariant, MetadataError, ModelMetadata, ModelSize};
 pub use options::{ActiveProvider, Provider, RuntimeOptions, StateBinding};

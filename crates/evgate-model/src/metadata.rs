@@ -31,6 +31,19 @@ pub const KEY_FLOW_STRIDE: &str = "evgate.flow-stride";
 /// validation data for the best per-event F1. Exports without the key use 0 (probability 0.5).
 pub const KEY_THRESHOLD_LOGIT: &str = "evgate.threshold-logit";
 
+/// Optional: the gate keeps the events of a horizon's *keep region*, the forecast logits
+/// dilated by this radius in model pixels (the maximum over the (2r + 1)-pixel square) and
+/// thresholded at `evgate.keep-threshold-logit`; chosen together on validation data for the
+/// best per-event F1. The forecast masks themselves stay undilated. Absent: 0.
+pub const KEY_KEEP_DILATION_PX: &str = "evgate.keep-dilation-px";
+
+/// Optional: the logit above which a pixel of a dilated forecast is in the keep region.
+/// Absent: `evgate.threshold-logit`'s value.
+pub const KEY_KEEP_THRESHOLD_LOGIT: &str = "evgate.keep-threshold-logit";
+
+/// The largest dilation radius an export may declare.
+pub const MAX_KEEP_DILATION_PX: u16 = 16;
+
 /// Flow strides an export may declare: powers of two that divide every padded input side.
 pub const FLOW_STRIDES: [u16; 5] = [1, 2, 4, 8, 16];
 
@@ -118,12 +131,20 @@ pub struct ModelMetadata {
     pub flow_stride: u16,
     /// Logit above which a mask pixel is set (0 for exports without the key).
     pub threshold_logit: f32,
+    /// Logit above which a pixel of a dilated forecast is kept (`threshold_logit` without the
+    /// key).
+    pub keep_threshold_logit: f32,
+    /// Radius by which forecast logits are dilated into keep regions (0 without the key).
+    pub keep_dilation_px: u16,
 }
 
 impl ModelMetadata {
     /// Parses the contract's keys through `lookup` (key → value, `None` when absent).
     pub fn from_lookup(lookup: impl Fn(&str) -> Option<String>) -> Result<Self, MetadataError> {
         let value = |key: &'static str| lookup(key).ok_or(MetadataError::Missing { key });
+        let threshold_logit = lookup(KEY_THRESHOLD_LOGIT).map_or(Ok(0.0), |threshold| {
+            parse_threshold_logit(KEY_THRESHOLD_LOGIT, &threshold)
+        })?;
         let metadata = Self {
             model_size: parse_model_size(&value(KEY_MODEL_SIZE)?)?,
             base_channels: parse_positive(KEY_BASE_CHANNELS, &value(KEY_BASE_CHANNELS)?)?,
@@ -138,8 +159,13 @@ impl ModelMetadata {
             train_steps: parse_count(KEY_TRAIN_STEPS, &value(KEY_TRAIN_STEPS)?)?,
             flow_stride: lookup(KEY_FLOW_STRIDE)
                 .map_or(Ok(1), |stride| parse_flow_stride(&stride))?,
-            threshold_logit: lookup(KEY_THRESHOLD_LOGIT)
-                .map_or(Ok(0.0), |threshold| parse_threshold_logit(&threshold))?,
+            threshold_logit,
+            keep_threshold_logit: lookup(KEY_KEEP_THRESHOLD_LOGIT)
+                .map_or(Ok(threshold_logit), |threshold| {
+                    parse_threshold_logit(KEY_KEEP_THRESHOLD_LOGIT, &threshold)
+                })?,
+            keep_dilation_px: lookup(KEY_KEEP_DILATION_PX)
+                .map_or(Ok(0), |radius| parse_mask_dilation(&radius))?,
         };
         Ok(metadata)
     }
@@ -262,10 +288,21 @@ fn parse_flow_stride(value: &str) -> Result<u16, MetadataError> {
     }
 }
 
-fn parse_threshold_logit(value: &str) -> Result<f32, MetadataError> {
+fn parse_threshold_logit(key: &'static str, value: &str) -> Result<f32, MetadataError> {
     match value.trim().parse::<f32>() {
         Ok(threshold) if threshold.is_finite() => Ok(threshold),
-        _ => Err(invalid(KEY_THRESHOLD_LOGIT, value, "a finite number")),
+        _ => Err(invalid(key, value, "a finite number")),
+    }
+}
+
+fn parse_mask_dilation(value: &str) -> Result<u16, MetadataError> {
+    match value.trim().parse::<u16>() {
+        Ok(radius) if radius <= MAX_KEEP_DILATION_PX => Ok(radius),
+        _ => Err(invalid(
+            KEY_KEEP_DILATION_PX,
+            value,
+            format!("a whole number of pixels from 0 to {MAX_KEEP_DILATION_PX}"),
+        )),
     }
 }
 
@@ -349,6 +386,24 @@ mod tests {
             parse(&map).unwrap_err().to_string(),
             "metadata key `evgate.threshold-logit` has value \"nan\"; expected a finite number"
         );
+    }
+
+    #[test]
+    fn the_mask_dilation_defaults_to_none_and_is_bounded() {
+        let mut map = valid();
+        assert_eq!(parse(&map).unwrap().keep_dilation_px, 0);
+        map.insert(KEY_KEEP_DILATION_PX, "3".to_owned());
+        assert_eq!(parse(&map).unwrap().keep_dilation_px, 3);
+        for bad in ["17", "-1", "2.5", "wide"] {
+            map.insert(KEY_KEEP_DILATION_PX, bad.to_owned());
+            assert_eq!(
+                parse(&map).unwrap_err().to_string(),
+                format!(
+                    "metadata key `evgate.keep-dilation-px` has value \"{bad}\"; expected a \
+                     whole number of pixels from 0 to 16"
+                )
+            );
+        }
     }
 
     #[test]

@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use evgate_model::{ModelError, ModelRuntime, RuntimeOptions};
+use evgate_core::{Event, SensorSize, TimeSpan, VoxelGrid};
+use evgate_model::{Forecaster, MaskRule, ModelError, ModelRuntime, RuntimeOptions};
 
 const COMMITTED_MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/evgate-S.onnx");
 
@@ -379,4 +380,120 @@ fn warm_up_leaves_the_runtime_as_loaded() {
     let without = fresh.forecast(&voxel, &HORIZONS).unwrap();
     assert!(max_abs_difference(after_warm_up.mask_logits(), without.mask_logits()) < 1e-6);
     assert!(warmed.warm_up(&[]).is_err(), "warm-up accepted no horizons");
+}
+
+/// A bar of events drifting right over 50 ms, on EVIMO's sensor.
+fn drifting_bar() -> (SensorSize, Vec<Event>, TimeSpan) {
+    let sensor = SensorSize::new(346, 260);
+    let events = (0..20_000i64)
+        .map(|i| {
+            let t = i * 50_000 / 20_000;
+            let x = (100 + t / 1000 + i % 12) as u16;
+            let y = (80 + (i * 7) % 90) as u16;
+            Event::new(t, x, y, i % 3 != 0)
+        })
+        .collect();
+    (sensor, events, TimeSpan::new(0, 50_000).unwrap())
+}
+
+#[test]
+fn the_forecasters_keep_regions_are_its_forecasts_dilated_by_its_rule() {
+    let (sensor, events, window) = drifting_bar();
+    let mut raw = load();
+    let mut grid = VoxelGrid::new(sensor, raw.metadata().bins as usize).unwrap();
+    grid.accumulate(&events, window);
+    grid.normalise();
+    let output = raw
+        .forecast(&grid.as_input(raw.input_size()).unwrap(), &HORIZONS)
+        .unwrap();
+    let (width, height) = (output.width(), output.height());
+    // Thresholds that set about 2 % and 1 % of the padded map, so that dilation has room.
+    let mut sorted: Vec<f32> = output.future_mask_logits().flatten().copied().collect();
+    sorted.sort_by(f32::total_cmp);
+    let threshold_logit = sorted[sorted.len() * 98 / 100];
+    let keep_threshold_logit = sorted[sorted.len() * 99 / 100];
+    let radius = 2;
+    // Threshold, then dilate the binary map by the square: the same region as dilating the
+    // logits first, since a threshold keeps the order of the maximum.
+    let expected: Vec<Vec<bool>> = output
+        .future_mask_logits()
+        .map(|plane| {
+            (0..usize::from(sensor.height))
+                .flat_map(|y| (0..usize::from(sensor.width)).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    (y.saturating_sub(radius)..=(y + radius).min(height - 1)).any(|yy| {
+                        (x.saturating_sub(radius)..=(x + radius).min(width - 1))
+                            .any(|xx| plane[yy * width + xx] > keep_threshold_logit)
+                    })
+                })
+                .collect()
+        })
+        .collect();
+
+    let forecast_with = |rule, keep_regions_only: bool| {
+        let mut forecaster = Forecaster::new(load(), rule, 1);
+        if keep_regions_only {
+            forecaster = forecaster.keep_regions_only();
+        }
+        let forecast = forecaster
+            .forecast(sensor, &events, window, &HORIZONS)
+            .unwrap();
+        let bools = |masks: &[evgate_core::BitMask]| -> Vec<Vec<bool>> {
+            masks.iter().map(|mask| mask.view().to_bools()).collect()
+        };
+        (
+            forecast.current.view().to_bools(),
+            bools(forecast.futures),
+            bools(forecast.keep),
+        )
+    };
+    let plain_rule = MaskRule {
+        threshold_logit,
+        keep_threshold_logit: threshold_logit,
+        keep_dilation_px: 0,
+    };
+    let dilating_rule = MaskRule {
+        threshold_logit,
+        keep_threshold_logit,
+        keep_dilation_px: radius as u16,
+    };
+    let plain = forecast_with(plain_rule, false);
+    let dilated = forecast_with(dilating_rule, false);
+    assert_eq!(
+        forecast_with(plain_rule, true),
+        plain,
+        "without dilation the keep regions are the forecasts, which it must then threshold"
+    );
+    let lean = forecast_with(dilating_rule, true);
+    assert_eq!(
+        lean.0, dilated.0,
+        "keep-regions-only changed the current mask"
+    );
+    assert_eq!(
+        lean.2, dilated.2,
+        "keep-regions-only changed the keep regions"
+    );
+    assert!(
+        lean.1.is_empty(),
+        "keep-regions-only thresholded the forecasts"
+    );
+    assert_eq!(
+        plain.2, plain.1,
+        "without dilation the keep regions are the forecasts"
+    );
+    assert_eq!(dilated.0, plain.0, "the current mask changed");
+    assert_eq!(dilated.1, plain.1, "the forecast masks changed");
+    for (k, (future, region)) in plain.1.iter().zip(&dilated.2).enumerate() {
+        let count = |mask: &[bool]| mask.iter().filter(|&&on| on).count();
+        assert!(
+            count(future) > 0 && count(region) > 0 && region != future,
+            "horizon {k}: {} pixels forecast, {} kept",
+            count(future),
+            count(region)
+        );
+        assert!(
+            *region == expected[k],
+            "horizon {k}: not the dilated region"
+        );
+    }
 }

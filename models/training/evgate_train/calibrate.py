@@ -8,12 +8,14 @@ Each sequence streams from its start with the recurrent state carried. The forec
 reference time t, at the service's 8 default horizons (12.5, 25, ..., 100 ms), judges the events
 of (t, t + 50 ms]: an event at t + d takes the mask whose interval holds d (the gate's midpoint
 rule). An event is a true positive when kept and labelled as a moving object (events_label > 0).
-Writes the F1 curve over thresholds, the best threshold and the figures at 0 as JSON; pass the
-threshold to `evgate_train.export --threshold-logit`.
+Writes the F1 curve over thresholds, the best threshold and the figures at 0 as JSON.
 
-`--dilations 0,1,2` also measures each forecast mask dilated by r pixels (a maximum of the
-logits over the (2r + 1)-pixel square around each pixel) before the lookup, and reports the best
-threshold per radius. evgate-gate applies no dilation: this measures what one would buy.
+`--dilations 0,1,2` also measures keep regions: each forecast's logits dilated by r pixels (a
+maximum over the (2r + 1)-pixel square around each pixel, as evgate-infer applies
+`evgate.keep-dilation-px`) before the lookup, and reports the best threshold per radius. The
+report's `choice` is the mask threshold (the best undilated one) and the keep radius and
+threshold of the best F1 over every radius measured; it prints them as
+`evgate_train.export` flags.
 """
 
 import argparse
@@ -162,6 +164,14 @@ def main(argv: list[str] | None = None) -> int:
             "at-zero": next(row for row in radius_curve if row["threshold-logit"] == 0.0),
         }
     curve, best, at_zero = by_radius[0]["curve"], by_radius[0]["best"], by_radius[0]["at-zero"]
+    chosen_radius = max(by_radius, key=lambda radius: by_radius[radius]["best"]["f1"])
+    chosen = by_radius[chosen_radius]["best"]
+    choice = {
+        "threshold-logit": best["threshold-logit"] + 0.0,
+        "keep-threshold-logit": chosen["threshold-logit"] + 0.0,
+        "keep-dilation-px": chosen_radius,
+        **{key: chosen[key] for key in ("precision", "recall", "f1", "kept")},
+    }
     report = {
         "model": str(args.model),
         "data": str(args.data),
@@ -173,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
         "best": best,
         "at-zero": at_zero,
         "curve": curve,
+        "choice": choice,
         "dilations": [
             {"dilation-px": radius, "best": entry["best"], "at-zero": entry["at-zero"]}
             for radius, entry in by_radius.items()
@@ -184,6 +195,11 @@ def main(argv: list[str] | None = None) -> int:
     for radius, entry in by_radius.items():
         if radius != 0:
             print(f"dilated {radius} px: best {summary(entry['best'])}")
+    print(
+        f"choice: --threshold-logit={choice['threshold-logit']:g} "
+        f"--keep-threshold-logit={choice['keep-threshold-logit']:g} --keep-dilation-px {chosen_radius} "
+        f"(F1 {choice['f1']:.3f})"
+    )
     return 0
 
 

@@ -25,6 +25,8 @@ from .voxel import WINDOW_US
 
 MAX_HORIZON_MS = 100
 OPSET = 18
+# The largest evgate.keep-dilation-px the runtime accepts (evgate-model's MAX_KEEP_DILATION_PX).
+MAX_KEEP_DILATION_PX = 16
 STATE_COUNT = 4
 INPUT_NAMES = ["voxel", "horizons_ms"] + [f"state_{i}" for i in range(STATE_COUNT)]
 OUTPUT_NAMES = ["mask_logits", "future_mask_logits", "future_flow"] + [f"new_state_{i}" for i in range(STATE_COUNT)]
@@ -64,6 +66,8 @@ def export(
     train_steps: int,
     warp_resolution: str = "half",
     threshold_logit: float = 0.0,
+    keep_dilation_px: int = 0,
+    keep_threshold_logit: float | None = None,
 ) -> None:
     check_input_size(height, width)
     # The wrapper must be in eval mode too: the exporter restores the wrapper's mode afterwards,
@@ -102,6 +106,10 @@ def export(
         "evgate.warp-resolution": warp_resolution,
         "evgate.flow-stride": str(network.flow_stride),
         "evgate.threshold-logit": repr(float(threshold_logit)),
+        "evgate.keep-threshold-logit": repr(
+            float(threshold_logit if keep_threshold_logit is None else keep_threshold_logit)
+        ),
+        "evgate.keep-dilation-px": str(keep_dilation_px),
     }
     del model.metadata_props[:]
     for key, value in metadata.items():
@@ -143,9 +151,26 @@ def main(argv: list[str] | None = None) -> int:
         help="mask threshold written as evgate.threshold-logit, which evgate-infer and evgate eval apply "
         "(choose it on val with evgate_train.calibrate)",
     )
+    parser.add_argument(
+        "--keep-threshold-logit",
+        type=float,
+        help="written as evgate.keep-threshold-logit: a horizon's events are kept where its forecast logits, "
+        "dilated by --keep-dilation-px, exceed it (default: --threshold-logit; choose both with calibrate "
+        "--dilations)",
+    )
+    parser.add_argument(
+        "--keep-dilation-px",
+        type=int,
+        default=0,
+        help="written as evgate.keep-dilation-px: the radius of the square over which evgate-infer and evgate eval "
+        f"take the maximum of each forecast's logits to draw its keep region (0 to {MAX_KEEP_DILATION_PX})",
+    )
     args = parser.parse_args(argv)
-    if not math.isfinite(args.threshold_logit):
-        parser.error(f"--threshold-logit {args.threshold_logit}: expected a finite number")
+    if not 0 <= args.keep_dilation_px <= MAX_KEEP_DILATION_PX:
+        parser.error(f"--keep-dilation-px {args.keep_dilation_px}: expected 0 to {MAX_KEEP_DILATION_PX} pixels")
+    for flag, value in (("--threshold-logit", args.threshold_logit), ("--keep-threshold-logit", args.keep_threshold_logit)):
+        if value is not None and not math.isfinite(value):
+            parser.error(f"{flag} {value}: expected a finite number")
     if args.train_steps is not None and args.train_steps < 0:
         parser.error(f"--train-steps {args.train_steps}: expected a non-negative number of steps")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
@@ -159,7 +184,16 @@ def main(argv: list[str] | None = None) -> int:
         network = SuppressionNetwork(NetworkConfig(size=args.size, time_conditioning=args.time_conditioning))
         manifest, steps = "untrained", 0
     export(
-        network, args.output, args.height, args.width, manifest, steps, args.warp_resolution, args.threshold_logit
+        network,
+        args.output,
+        args.height,
+        args.width,
+        manifest,
+        steps,
+        args.warp_resolution,
+        args.threshold_logit,
+        args.keep_dilation_px,
+        args.keep_threshold_logit,
     )
     log.info(
         "wrote %s (%s, %dx%d, %d steps, warp at %s resolution)",

@@ -69,6 +69,15 @@ def test_calibration_reports_each_dilation(synthetic_dir, tmp_path):
     assert by_radius[0]["at-zero"] == report["at-zero"]
     # A larger mask keeps every event the undilated one keeps.
     assert by_radius[2]["at-zero"]["kept"] >= by_radius[0]["at-zero"]["kept"]
+    # The keep rule is the best F1 over every radius; the mask threshold the best undilated one.
+    best = max(by_radius.values(), key=lambda entry: entry["best"]["f1"])
+    choice = report["choice"]
+    assert choice["threshold-logit"] == report["best"]["threshold-logit"]
+    assert (choice["keep-dilation-px"], choice["keep-threshold-logit"], choice["f1"]) == (
+        best["dilation-px"],
+        best["best"]["threshold-logit"],
+        best["best"]["f1"],
+    )
 
 
 @pytest.mark.parametrize("text", ["1,x", "-1", "1,1", ""])

@@ -1,10 +1,13 @@
+import re
+from pathlib import Path
+
 import numpy as np
 import onnx
 import onnxruntime
 import pytest
 import torch
 
-from evgate_train.export import INPUT_NAMES, OUTPUT_NAMES, export
+from evgate_train.export import INPUT_NAMES, MAX_KEEP_DILATION_PX, OUTPUT_NAMES, export, main
 from evgate_train.network import NetworkConfig, SuppressionNetwork
 from evgate_train.sequence import load_sequence
 from evgate_train.voxel import voxel_grid
@@ -58,6 +61,8 @@ def test_contract_names_and_metadata(exported):
     assert metadata["evgate.train-manifest-sha256"] == "ab" * 32
     assert metadata["evgate.warp-resolution"] == warp_resolution
     assert metadata["evgate.flow-stride"] == "8"
+    rule = ("evgate.threshold-logit", "evgate.keep-threshold-logit", "evgate.keep-dilation-px")
+    assert tuple(metadata[key] for key in rule) == ("0.0", "0.0", "0")
     # The decoders' convolutions of features + prediction (8 + 1, 8 + 2 channels) were split.
     assert sum(node.name.endswith("/input_part_1") for node in onnx.load(str(path)).graph.node) >= 2
     flow = next(o for o in session.get_outputs() if o.name == "future_flow")
@@ -85,3 +90,28 @@ def test_parity_on_simulated_windows_with_carried_state(exported, synthetic_dir)
             sequence.events_on[window], t_end, sequence.width, sequence.height,
         )
         states = _compare(network, session, warp_resolution, voxel, [20.0, 100.0], states)
+
+
+def test_the_command_writes_the_calibrated_mask_rule(tmp_path):
+    path = tmp_path / "rule.onnx"
+    common = ["--untrained", "--size", "XS", "--height", "48", "--width", "96", "--output", str(path)]
+    rule = ("evgate.threshold-logit", "evgate.keep-threshold-logit", "evgate.keep-dilation-px")
+    assert main([*common, "--threshold-logit", "-0.5"]) == 0
+    metadata = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+    assert tuple(metadata[key] for key in rule) == ("-0.5", "-0.5", "0")
+    assert main([*common, "--threshold-logit", "-0.5", "--keep-threshold-logit", "1.25", "--keep-dilation-px", "3"]) == 0
+    metadata = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+    assert tuple(metadata[key] for key in rule) == ("-0.5", "1.25", "3")
+
+
+@pytest.mark.parametrize("radius", ["-1", "17"])
+def test_a_dilation_the_runtime_refuses_is_refused_at_export(tmp_path, radius, capsys):
+    with pytest.raises(SystemExit):
+        main(["--untrained", "--output", str(tmp_path / "x.onnx"), "--keep-dilation-px", radius])
+    assert f"--keep-dilation-px {radius}: expected 0 to 16 pixels" in capsys.readouterr().err
+    assert not (tmp_path / "x.onnx").exists()
+
+
+def test_the_dilation_bound_is_the_runtimes():
+    rust = (Path(__file__).parents[3] / "crates/evgate-model/src/metadata.rs").read_text()
+    assert re.search(r"pub const MAX_KEEP_DILATION_PX: u16 = (\d+);", rust).group(1) == str(MAX_KEEP_DILATION_PX)

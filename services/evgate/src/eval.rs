@@ -15,7 +15,7 @@ use evgate_eval::{
     read_recording, write_report, EvalConfig, Evaluation, FlopTable, InputOptions, LoadedModel,
     Report,
 };
-use evgate_model::{Forecaster, ModelRuntime, Provider, RuntimeOptions};
+use evgate_model::{Forecaster, MaskRule, ModelRuntime, Provider, RuntimeOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use models::{select_models, ModelSpec, DEFAULT_MODEL};
@@ -184,10 +184,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             steps = metadata.train_steps,
             "loaded"
         );
-        let threshold_logit = metadata.threshold_logit;
+        let rule = MaskRule::of(metadata);
         models.push(LoadedModel {
             label: spec.label.clone(),
-            forecaster: Forecaster::new(runtime, threshold_logit, 1),
+            forecaster: Forecaster::new(runtime, rule, 1),
         });
     }
 

@@ -62,6 +62,17 @@ pub struct Config {
     /// default: the model's `evgate.threshold-logit` (chosen on validation data), else 0.
     #[arg(long, allow_negative_numbers = true)]
     pub threshold_logit: Option<f32>,
+    /// Logit above which a pixel of a dilated forecast is in the keep region the gate judges a
+    /// horizon's events by; default: the model's `evgate.keep-threshold-logit` (chosen on
+    /// validation data), else the mask threshold.
+    #[arg(long, allow_negative_numbers = true)]
+    pub keep_threshold_logit: Option<f32>,
+    /// Publish for each horizon the keep region instead of the forecast mask: the forecast
+    /// logits dilated by this many model pixels (each pixel takes the largest logit of the
+    /// (2N + 1)-pixel square around it), above --keep-threshold-logit; default: the model's
+    /// `evgate.keep-dilation-px` (chosen on validation data), else 0.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(0..=i64::from(evgate_model::metadata::MAX_KEEP_DILATION_PX)))]
+    pub keep_dilation_px: Option<u16>,
     /// Bin the sensor's pixels N×N for the network, so that a sensor larger than the model's
     /// input runs (1280×720 with N = 2 on a 640×480 export); every pixel takes its cell's
     /// verdict, so events are still gated at full resolution.

@@ -22,8 +22,8 @@ pub enum InferError {
     Model(#[from] ModelError),
     #[error(transparent)]
     Horizons(#[from] HorizonError),
-    #[error("--threshold-logit {value}: must be a finite number")]
-    ThresholdLogit { value: f32 },
+    #[error("{flag} {value}: must be a finite number")]
+    ThresholdLogit { flag: &'static str, value: f32 },
     #[error(transparent)]
     Windowing(#[from] WindowingError),
     #[error(transparent)]

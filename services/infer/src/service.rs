@@ -13,7 +13,7 @@ use evgate_ipc::{
     clock, create_node, pin_current_thread, BatchHeader, ForecastHeader, PipelineNames, Qos,
     SlicePublisher, SliceSubscriber, Stream, MAX_HORIZONS,
 };
-use evgate_model::{Forecaster, ModelRuntime, RuntimeOptions};
+use evgate_model::{Forecaster, MaskRule, ModelRuntime, RuntimeOptions};
 use tracing::{error, info, warn};
 
 use crate::config::Config;
@@ -53,11 +53,20 @@ pub fn run(args: &Config) -> Result<InferReport, InferError> {
     // past a first window that on CUDA took 2 s (H200: cuDNN's algorithm search).
     let warm_up = runtime.warm_up(&horizons_ms)?;
     info!(warm_up_ms = warm_up.as_secs_f64() * 1e3, "model warmed up");
-    let threshold_logit = args.threshold_logit.unwrap_or(metadata.threshold_logit);
-    if !threshold_logit.is_finite() {
-        return Err(InferError::ThresholdLogit {
-            value: threshold_logit,
-        });
+    let rule = MaskRule {
+        threshold_logit: args.threshold_logit.unwrap_or(metadata.threshold_logit),
+        keep_threshold_logit: args
+            .keep_threshold_logit
+            .unwrap_or(metadata.keep_threshold_logit),
+        keep_dilation_px: args.keep_dilation_px.unwrap_or(metadata.keep_dilation_px),
+    };
+    for (flag, value) in [
+        ("--threshold-logit", rule.threshold_logit),
+        ("--keep-threshold-logit", rule.keep_threshold_logit),
+    ] {
+        if !value.is_finite() {
+            return Err(InferError::ThresholdLogit { flag, value });
+        }
     }
     let window_us = i64::from(metadata.window_ms) * 1000;
     let mode = match args.window_events {
@@ -78,7 +87,9 @@ pub fn run(args: &Config) -> Result<InferReport, InferError> {
         state_bound: runtime.state_bound(),
         warm_up_ms: warm_up.as_secs_f64() * 1e3,
         threads: args.threads,
-        threshold_logit,
+        threshold_logit: rule.threshold_logit,
+        keep_threshold_logit: rule.keep_threshold_logit,
+        keep_dilation_px: rule.keep_dilation_px,
         downsample: args.downsample,
         horizons_ms: horizons_ms.clone(),
         windowing: describe(mode),
@@ -110,7 +121,7 @@ pub fn run(args: &Config) -> Result<InferReport, InferError> {
     let worker = {
         let slot = Arc::clone(&slot);
         let worker = Worker::new(
-            Forecaster::new(runtime, threshold_logit, args.downsample),
+            Forecaster::new(runtime, rule, args.downsample).keep_regions_only(),
             horizons_ms.clone(),
         );
         std::thread::Builder::new()

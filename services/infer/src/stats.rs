@@ -65,6 +65,9 @@ pub struct RunDescription {
     pub threads: usize,
     /// The mask threshold in use: --threshold-logit, else the model's.
     pub threshold_logit: f32,
+    /// The keep regions' threshold and dilation in use: the flags, else the model's.
+    pub keep_threshold_logit: f32,
+    pub keep_dilation_px: u16,
     /// Side of the square of sensor pixels one network input cell bins.
     pub downsample: u16,
     pub horizons_ms: Vec<f32>,
@@ -94,6 +97,8 @@ pub struct InferReport {
     pub warm_up_ms: f64,
     pub threads: usize,
     pub threshold_logit: f32,
+    pub keep_threshold_logit: f32,
+    pub keep_dilation_px: u16,
     pub downsample: u16,
     pub horizons_ms: Vec<f32>,
     pub windowing: String,
@@ -139,6 +144,8 @@ impl InferReport {
             warm_up_ms: description.warm_up_ms,
             threads: description.threads,
             threshold_logit: description.threshold_logit,
+            keep_threshold_logit: description.keep_threshold_logit,
+            keep_dilation_px: description.keep_dilation_px,
             downsample: description.downsample,
             horizons_ms: description.horizons_ms.clone(),
             windowing: description.windowing.clone(),

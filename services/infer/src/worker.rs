@@ -1,5 +1,5 @@
 //! The inference thread: voxelises a closed window, runs the network with its carried state and
-//! thresholds the current and forecast logits into bit masks ready to publish.
+//! thresholds the current mask and each horizon's keep region into bit masks ready to publish.
 
 use std::sync::mpsc::Sender;
 use std::sync::Arc;
@@ -99,9 +99,10 @@ impl Worker {
             job.window.span,
             &self.horizons_ms,
         )?;
+        // The gate judges a horizon's events by its keep region, so that is what goes out.
         let mut mask_words =
-            Vec::with_capacity((1 + forecast.futures.len()) * forecast.current.as_words().len());
-        for mask in std::iter::once(forecast.current).chain(forecast.futures) {
+            Vec::with_capacity((1 + forecast.keep.len()) * forecast.current.as_words().len());
+        for mask in std::iter::once(forecast.current).chain(forecast.keep) {
             mask_words.extend_from_slice(mask.as_words());
         }
         Ok(ForecastReady {

@@ -165,7 +165,18 @@ fn forecasts_until_the_end_of_the_stream(name: &str, extra: &[&str]) {
 
 #[test]
 fn sigint_stops_the_service_cleanly_with_its_stats() {
-    stops_cleanly_on_sigint("event", &[]);
+    let report = stops_cleanly_on_sigint("event", &[]);
+    // The model's own rule (that it is applied is checked against `evgate eval` by
+    // run_command's lock-step test).
+    for key in ["threshold-logit", "keep-threshold-logit"] {
+        assert!(report[key].as_f64().is_some_and(f64::is_finite), "{report}");
+    }
+    assert!(
+        report["keep-dilation-px"]
+            .as_u64()
+            .is_some_and(|px| px <= 16),
+        "{report}"
+    );
 }
 
 #[test]
@@ -173,7 +184,25 @@ fn sigint_stops_a_busy_polling_service_cleanly_too() {
     stops_cleanly_on_sigint("busy-poll", &["--wait", "busy-poll"]);
 }
 
-fn stops_cleanly_on_sigint(name: &str, extra: &[&str]) {
+#[test]
+fn the_mask_rule_flags_override_the_models() {
+    let report = stops_cleanly_on_sigint(
+        "mask-rule",
+        &[
+            "--threshold-logit",
+            "-0.5",
+            "--keep-threshold-logit",
+            "1.25",
+            "--keep-dilation-px",
+            "3",
+        ],
+    );
+    assert_eq!(report["threshold-logit"], -0.5, "{report}");
+    assert_eq!(report["keep-threshold-logit"], 1.25, "{report}");
+    assert_eq!(report["keep-dilation-px"], 3, "{report}");
+}
+
+fn stops_cleanly_on_sigint(name: &str, extra: &[&str]) -> serde_json::Value {
     let names = unique_names(&format!("infer-sigint-{name}"));
     let node = create_node("infer-sigint-test").unwrap();
     let publisher =
@@ -190,8 +219,7 @@ fn stops_cleanly_on_sigint(name: &str, extra: &[&str]) {
         "{report}"
     );
     assert!(report["inference"]["count"] == 0, "{report}");
-    // The test export carries no evgate.threshold-logit: the threshold is 0.
-    assert_eq!(report["threshold-logit"], 0.0, "{report}");
+    report
 }
 
 #[test]
@@ -216,4 +244,15 @@ fn bad_settings_fail_with_the_value_at_fault() {
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("#1 = 500"), "{stderr}");
+
+    let output = Command::new(&infer)
+        .args(["--keep-dilation-px", "17"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("--keep-dilation-px") && stderr.contains("17") && stderr.contains("0..=16"),
+        "{stderr}"
+    );
 }
