@@ -55,7 +55,7 @@ pub use qos::{Overflow, Qos};
 pub use slice_writer::SliceWriter;
 pub use stats::PipelineStats;
 pub use stop_request::{run_until_stopped, stop_requested, StopChecks};
-pub use wait::{pin_current_thread, Backoff, PinError, WaitStrategy};
+pub use wait::{pin_current_thread, Backoff, PinError, WaitStrategy, MISSED_WAKEUP_POLL};
 
 /// The iceoryx2 service flavour every evgate process uses: inter-process shared memory.
 pub type Service = iceoryx2::service::ipc::Service;

@@ -561,7 +561,8 @@ where
         })
     }
 
-    /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`.
+    /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`, beside an
+    /// interval of [`crate::MISSED_WAKEUP_POLL`] that reads the samples too.
     pub fn listener(&self) -> &Listener<Service> {
         &self.listener
     }
@@ -663,7 +664,8 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> LatestSubscriber<T> {
         Ok(latest)
     }
 
-    /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`.
+    /// The wake-up listener: attach it to a `WaitSet` with `attach_notification`, beside an
+    /// interval of [`crate::MISSED_WAKEUP_POLL`] that reads the samples too.
     pub fn listener(&self) -> &Listener<Service> {
         &self.listener
     }

@@ -310,6 +310,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let status_tick = waitset
         .attach_interval(Duration::from_millis(args.status_interval_ms.max(1)))
         .context("cannot attach the status interval")?;
+    let missed_wakeup_poll = waitset
+        .attach_interval(evgate_ipc::MISSED_WAKEUP_POLL)
+        .context("cannot attach the missed wake-up poll")?;
 
     let mut scorer = Scorer::new(args.mode);
     let mut verdicts = Verdicts::default();
@@ -340,7 +343,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         &waitset,
         |attachment: WaitSetAttachmentId<evgate_ipc::Service>| {
             let step = (|| -> anyhow::Result<bool> {
-                if attachment.has_event_from(&labels_guard) {
+                // The poll reads both streams as if both had notified.
+                let polled = attachment.has_event_from(&missed_wakeup_poll);
+                if polled || attachment.has_event_from(&labels_guard) {
                     labels.clear_wakeups();
                     while let Some(sample) = labels.receive()? {
                         let header = sample.user_header();
@@ -348,7 +353,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                         scorer.add_labels(header.stream_id, header.sequence, sample.payload());
                     }
                 }
-                if attachment.has_event_from(&bitmaps_guard) {
+                if polled || attachment.has_event_from(&bitmaps_guard) {
                     bitmaps.clear_wakeups();
                     while let Some(sample) = bitmaps.receive()? {
                         let header = sample.user_header();

@@ -14,7 +14,8 @@ use crate::{Config, Drained, Gate, RunError};
 pub type EndedBy = &'static str;
 
 impl Gate {
-    /// Sleeps in a WaitSet until a batch, a forecast or the stats interval wakes it.
+    /// Sleeps in a WaitSet until a batch, a forecast, the stats interval or the missed wake-up
+    /// poll wakes it.
     pub(crate) fn run_on_events(
         &mut self,
         node: &evgate_ipc::Node,
@@ -44,31 +45,44 @@ impl Gate {
                 what: "stats interval",
                 source,
             })?;
+        let missed_wakeup_poll = waitset
+            .attach_interval(evgate_ipc::MISSED_WAKEUP_POLL)
+            .map_err(|source| RunError::WaitSetAttach {
+                what: "missed wake-up poll",
+                source,
+            })?;
 
         let mut failure = None;
         let mut reached_end = false;
         let mut stopped_by_signal = false;
         let on_wakeup = |attachment: WaitSetAttachmentId<evgate_ipc::Service>| {
-            let step = if attachment.has_event_from(&forecast_guard) {
+            // The poll reads both streams as if both had notified.
+            let polled = attachment.has_event_from(&missed_wakeup_poll);
+            let mut step = Ok(false);
+            if polled || attachment.has_event_from(&forecast_guard) {
                 forecasts.clear_wakeups();
-                self.take_forecasts(forecasts)
-                    .and_then(|_| self.release_held(node, false))
-            } else if attachment.has_event_from(&events_guard) {
+                step = self
+                    .take_forecasts(forecasts)
+                    .and_then(|_| self.release_held(node, false));
+            }
+            if step.as_ref().is_ok_and(|ended| !ended)
+                && (polled || attachment.has_event_from(&events_guard))
+            {
                 events.clear_wakeups();
-                self.drain_events(node, events, forecasts)
-                    .map(|(drained, _)| match drained {
-                        Drained::EndOfStream => true,
-                        Drained::Signal => {
-                            stopped_by_signal = true;
-                            true
-                        }
-                        Drained::Empty => false,
-                    })
-            } else if attachment.has_event_from(&stats_tick) {
-                self.publish_stats().map(|()| false)
-            } else {
-                Ok(false)
-            };
+                step =
+                    self.drain_events(node, events, forecasts)
+                        .map(|(drained, _)| match drained {
+                            Drained::EndOfStream => true,
+                            Drained::Signal => {
+                                stopped_by_signal = true;
+                                true
+                            }
+                            Drained::Empty => false,
+                        });
+            }
+            if attachment.has_event_from(&stats_tick) {
+                step = step.and_then(|ended| self.publish_stats().map(|()| ended));
+            }
             match step {
                 Ok(true) if stopped_by_signal => CallbackProgression::Stop,
                 Ok(true) if args.exit_at_end_of_stream => {
@@ -87,6 +101,7 @@ impl Gate {
         drop(events_guard);
         drop(forecast_guard);
         drop(stats_tick);
+        drop(missed_wakeup_poll);
         self.publish_stats()?;
         if let Some(error) = failure {
             return Err(error);

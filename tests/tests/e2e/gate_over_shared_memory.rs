@@ -72,6 +72,12 @@ impl Harness {
     }
 
     fn publish(&mut self, events: &[Event], flags: u32) {
+        let header = self.next_header(events, flags);
+        self.events.publish(header, events).unwrap();
+    }
+
+    /// The header of the next batch, counted as published.
+    fn next_header(&mut self, events: &[Event], flags: u32) -> BatchHeader {
         let header = BatchHeader {
             stream_id: 77,
             sequence: self.sequence,
@@ -84,9 +90,9 @@ impl Harness {
             height: SENSOR.height,
             flags,
         };
-        self.events.publish(header, events).unwrap();
         self.sequence += 1;
         self.published += events.len() as u64;
+        header
     }
 
     fn drain(subscriber: &SliceSubscriber<Event, BatchHeader>) -> Vec<Event> {
@@ -293,6 +299,43 @@ fn gate_falls_back_to_its_policy_when_forecasts_stop_and_resumes_when_they_retur
     let summary = gate.summary(TIMEOUT).unwrap();
     assert_eq!(summary["balanced"], true);
     assert_eq!(u64_at(&summary, "/stats/forecasts-received"), 2);
+}
+
+/// An iceoryx2 0.10 listener can lose every notification after a race with its notifier
+/// (`evgate_ipc::MISSED_WAKEUP_POLL`): the gate must still read each batch. Its batches come
+/// from a publisher that never notifies, the worst case of that race.
+#[test]
+fn a_gate_reads_batches_whose_notifications_never_come() {
+    let mut harness = Harness::new("silent");
+    let mut gate = harness.start_gate(&["--no-forecast", "pass"]);
+    let service = harness
+        .node
+        .service_builder(&harness.names.service(Stream::Events).unwrap())
+        .publish_subscribe::<[Event]>()
+        .user_header::<BatchHeader>()
+        .open()
+        .unwrap();
+    let silent = service
+        .publisher_builder()
+        .initial_max_slice_len(100)
+        .create()
+        .unwrap();
+    let mut publish_silently = |events: &[Event], flags: u32| {
+        let header = harness.next_header(events, flags);
+        let mut sample = silent.loan_slice_uninit(events.len()).unwrap();
+        *sample.user_header_mut() = header;
+        sample.write_from_slice(events).send().unwrap();
+    };
+    for batch in sweep(1_000_000, 300).chunks(100) {
+        publish_silently(batch, 0);
+    }
+    publish_silently(&[], BatchFlags::END_OF_STREAM);
+
+    let summary = gate.summary(TIMEOUT).unwrap();
+    assert_eq!(summary["ended-by"], "end-of-stream");
+    assert_eq!(u64_at(&summary, "/stats/input-events"), 300);
+    assert_eq!(u64_at(&summary, "/stats/unjudged-passed-events"), 300);
+    assert_eq!(summary["balanced"], true);
 }
 
 /// A `config/iceoryx2.toml` in the working directory, which iceoryx2 on its defaults loads first,
