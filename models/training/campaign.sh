@@ -26,6 +26,17 @@ run=${RUN:-S-v5c-jitter-pos1}
 init_from=${INIT_FROM-../campaign/S-v5c-jitter-pos1/checkpoint.pt}
 evgate=$root/target/release/evgate
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
+    # The split is 62.1 GB (docs/simulator.md); a full disk stops the simulator at the last
+    # sequences, after 44 minutes, so refuse at once when it cannot fit.
+    needed_kb=$((62200 * 1000 * 1000 / 1024))
+    present_kb=$(du -sk "$root/data/suite-v5-full" 2>/dev/null | cut -f1 || true)
+    free_kb=$(df -Pk "$root" | awk 'NR == 2 { print $4 }')
+    if (( free_kb + ${present_kb:-0} < needed_kb )); then
+        echo "campaign: the train split needs 62.2 GB in $root/data; $((free_kb * 1024 / 1000000000)) GB free" \
+            "beside $((${present_kb:-0} * 1024 / 1000000000)) GB already there. Free space first (for" \
+            "example cargo clean --profile dev; the release build runs the simulator)." >&2
+        exit 1
+    fi
     "$evgate" sim suite --out "$root/data/suite-v5-full" --scale full --splits train
 fi
 if [[ ! -d $root/data/suite-v5/val ]]; then
