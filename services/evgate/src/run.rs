@@ -133,6 +133,10 @@ pub struct RunArgs {
     /// unix:///PATH (evgate-gate --serve-kept), for DV tools and dv-processing's NetworkReader.
     #[arg(long)]
     serve_kept: Option<String>,
+    /// After the last batch, how long --serve-kept holds its client connections open before it
+    /// closes them, milliseconds (evgate-gate --serve-kept-linger-ms).
+    #[arg(long, default_value_t = 1000)]
+    serve_kept_linger_ms: u64,
     /// Serve Prometheus metrics at http://HOST:PORT/metrics: the gate's event and forecast
     /// counters, and the model runtime and prediction age sampled at each stats publication.
     #[arg(long)]
@@ -252,6 +256,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     gate.json = true;
     gate.cpu = args.gate_cpu;
     gate.serve_kept = args.serve_kept.clone();
+    gate.serve_kept_linger_ms = args.serve_kept_linger_ms;
     gate.lock_step = args.lock_step;
     let gate_args = configs.arguments("evgate-gate", &gate)?;
     let mut services = vec![Service::start(&directory, "evgate-gate", &gate_args)?];

@@ -116,6 +116,12 @@ pub struct Config {
     /// the first batch gives the sensor size).
     #[arg(long)]
     pub serve_kept: Option<String>,
+    /// After the last batch, how long --serve-kept holds its client connections open before it
+    /// closes them, milliseconds: dv-processing's NetworkReader discards what it received but
+    /// has not yet handed out once the server closes, so a reader that lags gets this long to
+    /// catch up.
+    #[arg(long, default_value_t = 1000)]
+    pub serve_kept_linger_ms: u64,
     /// Print the final counters as JSON on stdout.
     #[arg(long)]
     pub json: bool,
@@ -275,6 +281,7 @@ pub fn run(args: &Config) -> Result<GateSummary, RunError> {
                 gauge,
                 args.overflow,
                 Duration::from_millis(args.block_timeout_ms),
+                Duration::from_millis(args.serve_kept_linger_ms),
             )
         })
         .transpose()?;

@@ -8,6 +8,11 @@
 //! the queue is full the batch is not sent and is counted, and a client that does not take a
 //! packet within a second is disconnected); under block it waits up to `--block-timeout-ms`
 //! for room in the queue, and a client gets that long (at least a second) to take a packet.
+//!
+//! After the last batch the connections stay open for a linger period before they close:
+//! dv-processing 2.0.4's `NetworkReader` discards the packets it received but has not yet
+//! handed out once its server closes, so a reader that lags behind the stream would lose its
+//! tail.
 
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -154,12 +159,14 @@ pub struct KeptServer {
 
 impl KeptServer {
     /// Listens on `endpoint`; `clients_gauge`, when given, follows the number of clients.
-    /// Under `Overflow::Block` a batch waits up to `block_timeout` for the network.
+    /// Under `Overflow::Block` a batch waits up to `block_timeout` for the network. Clients
+    /// still connected after the last batch are closed `linger` later.
     pub fn start(
         endpoint: &str,
         clients_gauge: Option<Gauge>,
         overflow: Overflow,
         block_timeout: Duration,
+        linger: Duration,
     ) -> Result<Self, ServeError> {
         let queue_wait = (overflow == Overflow::Block).then_some(block_timeout);
         let write_timeout = queue_wait.map_or(WRITE_TIMEOUT, |wait| wait.max(WRITE_TIMEOUT));
@@ -190,7 +197,7 @@ impl KeptServer {
         };
         let sending = std::thread::Builder::new()
             .name("evgate-serve-send".to_owned())
-            .spawn(move || send_packets(&received, &clients))
+            .spawn(move || send_packets(&received, &clients, linger))
             .expect("spawning a thread");
         info!(%endpoint, "serving the kept events as an AEDAT 4 network stream");
         Ok(Self {
@@ -276,7 +283,7 @@ fn accept_clients(
     }
 }
 
-fn send_packets(received: &Receiver<Message>, clients: &Mutex<Clients>) {
+fn send_packets(received: &Receiver<Message>, clients: &Mutex<Clients>, linger: Duration) {
     let mut packet = Vec::new();
     for Message::Kept { sensor, events } in received {
         let mut clients = lock(clients);
@@ -293,7 +300,12 @@ fn send_packets(received: &Receiver<Message>, clients: &Mutex<Clients>) {
         push_event_packet(&events, &mut packet);
         clients.broadcast(&packet);
     }
-    lock(clients).connected.clear();
+    if !lock(clients).connected.is_empty() {
+        std::thread::sleep(linger);
+    }
+    let mut clients = lock(clients);
+    clients.connected.clear();
+    clients.update_gauge();
 }
 
 #[cfg(test)]
@@ -308,13 +320,19 @@ mod tests {
         client: std::os::unix::net::UnixStream,
     }
 
-    fn serve_one_client(overflow: Overflow, block_timeout: Duration) -> Served {
+    fn serve_one_client(overflow: Overflow, block_timeout: Duration, linger: Duration) -> Served {
         let directory = tempfile::tempdir().unwrap();
         let path = directory.path().join("kept.sock");
         let endpoint = format!("unix://{}", path.display());
         let gauge = Gauge::default();
-        let server =
-            KeptServer::start(&endpoint, Some(gauge.clone()), overflow, block_timeout).unwrap();
+        let server = KeptServer::start(
+            &endpoint,
+            Some(gauge.clone()),
+            overflow,
+            block_timeout,
+            linger,
+        )
+        .unwrap();
         let client = std::os::unix::net::UnixStream::connect(&path).unwrap();
         let deadline = std::time::Instant::now() + Duration::from_secs(30);
         while gauge.get() != 1 {
@@ -339,7 +357,7 @@ mod tests {
             endpoint,
             server,
             client,
-        } = serve_one_client(Overflow::DropAndCount, Duration::ZERO);
+        } = serve_one_client(Overflow::DropAndCount, Duration::ZERO, Duration::ZERO);
         let path = directory.path().join("kept.sock");
         let sensor = SensorSize::new(320, 240);
         let batches = [
@@ -364,13 +382,37 @@ mod tests {
     }
 
     #[test]
+    fn a_client_stays_connected_for_the_linger_after_the_last_batch() {
+        let linger = Duration::from_secs(2);
+        let Served {
+            directory: _directory,
+            endpoint,
+            server,
+            client,
+        } = serve_one_client(Overflow::DropAndCount, Duration::ZERO, linger);
+        let sent = vec![Event::new(10, 1, 2, true)];
+        let last_batch_queued = std::time::Instant::now();
+        server.send(SensorSize::new(320, 240), sent.clone());
+        let closing = std::thread::spawn(move || drop(server));
+        let endpoint = Endpoint::parse(&endpoint).unwrap().unwrap();
+        let mut decoder = endpoint.decoder(Box::new(client), None).unwrap();
+        let (mut decoded, mut chunk) = (Vec::new(), Vec::new());
+        while decoder.read_chunk(&mut chunk).unwrap() > 0 {
+            decoded.extend_from_slice(&chunk);
+        }
+        assert!(last_batch_queued.elapsed() >= linger);
+        assert_eq!(decoded, sent);
+        closing.join().unwrap();
+    }
+
+    #[test]
     fn under_block_a_client_slower_than_the_write_timeout_loses_nothing() {
         let Served {
             directory: _directory,
             endpoint,
             server,
             client,
-        } = serve_one_client(Overflow::Block, Duration::from_secs(60));
+        } = serve_one_client(Overflow::Block, Duration::from_secs(60), Duration::ZERO);
         let sensor = SensorSize::new(320, 240);
         let batch: Vec<Event> = (0..1000)
             .map(|i| Event::new(i, (i % 320) as u16, 7, true))
@@ -404,6 +446,7 @@ mod tests {
             "http://localhost:80",
             None,
             Overflow::DropAndCount,
+            Duration::ZERO,
             Duration::ZERO,
         )
         .err()

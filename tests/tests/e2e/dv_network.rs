@@ -253,6 +253,9 @@ fn dv_processing_reads_the_kept_events_the_gate_serves() {
             "block",
             "--block-timeout-ms",
             "30000",
+            // The reader discards what it has not yet handed out once the gate closes.
+            "--serve-kept-linger-ms",
+            "10000",
             "--exit-at-end-of-stream",
             "--json",
         ],
