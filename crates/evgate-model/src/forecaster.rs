@@ -190,13 +190,16 @@ impl Forecaster {
         if keeps_the_forecast {
             self.keep.clear();
         } else {
-            self.keep.resize_with(output.horizon_count(), || {
-                BitMask::new(sensor).expect("the masks above have this size")
-            });
+            let horizon_count = output.horizon_count();
+            if self.keep.len() != horizon_count
+                || self.keep.first().map(BitMask::size) != Some(sensor)
+            {
+                self.keep = (0..horizon_count)
+                    .map(|_| BitMask::new(sensor))
+                    .collect::<Result<_, _>>()
+                    .map_err(mask_error)?;
+            }
             for (region, logits) in self.keep.iter_mut().zip(output.future_mask_logits()) {
-                if region.size() != sensor {
-                    *region = BitMask::new(sensor).map_err(mask_error)?;
-                }
                 dilate_logits(
                     logits,
                     row_stride,
