@@ -11,19 +11,20 @@
 # input) and a BCE positive weight of 1, each of which beat the recipe without it in a paired
 # run on the final v5 val (mIoU at t + 100 ms +1.4 [0.4, 2.8] and +1.6 [1.1, 2.2]; model card).
 # It keeps an exponential moving average of the weights (decay 0.999) in ema.pt beside the
-# checkpoint, to choose on val between the averaged and the last weights. The shipped S is
-# S-v5c-jitter-pos1 at the end of its 4000-step schedule; STEPS=N continues it on the cosine
-# schedule of N steps (the rate jumps to where that schedule stands at step 4000).
+# checkpoint, to choose on val between the averaged and the last weights. The shipped S is the
+# average of run S-v5c-6k at the end of its 6000-step schedule (which continued run
+# S-v5c-jitter-pos1 from its step 4000); STEPS=N continues it on the cosine schedule of N steps
+# (the rate jumps to where that schedule stands at step 6000).
 #
-# Environment: RUN (S-v5c-jitter-pos1), INIT_FROM (../campaign/S-v5c-jitter-pos1/checkpoint.pt,
-# relative to models/training: the shipped S, for a new RUN; empty: random weights), STEPS
-# (4000: the schedule's length), STOP_AT (0: run to STEPS), THREADS (1). Extra arguments go to
+# Environment: RUN (S-v5c-6k), INIT_FROM (../campaign/S-v5c-6k/ema.pt, relative to
+# models/training: the shipped S, for a new RUN; empty: random weights), STEPS (6000: the
+# schedule's length), STOP_AT (0: run to STEPS), THREADS (1). Extra arguments go to
 # evgate_train.train.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
-run=${RUN:-S-v5c-jitter-pos1}
-init_from=${INIT_FROM-../campaign/S-v5c-jitter-pos1/checkpoint.pt}
+run=${RUN:-S-v5c-6k}
+init_from=${INIT_FROM-../campaign/S-v5c-6k/ema.pt}
 evgate=$root/target/release/evgate
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
     # The split is 62.1 GB (docs/simulator.md); a full disk stops the simulator at the last
@@ -46,6 +47,6 @@ cd "$root/models/training"
 # Paths stay relative to models/training: the data cursor in the checkpoint names them.
 exec nice -n 19 .venv/bin/python -m evgate_train.train \
     --data ../../data/suite-v5-full/train --manifest ../../data/suite-v5-full/manifest.json \
-    --run-dir "../campaign/$run" --size S --steps "${STEPS:-4000}" --stop-at-step "${STOP_AT:-0}" \
+    --run-dir "../campaign/$run" --size S --steps "${STEPS:-6000}" --stop-at-step "${STOP_AT:-0}" \
     --threads "${THREADS:-1}" --val-data ../../data/suite-v5/val --val-every 500 \
     --checkpoint-every 100 --event-jitter --positive-weight 1 --ema-decay 0.999 --resume ${init_from:+--init-from "$init_from"} "$@"
