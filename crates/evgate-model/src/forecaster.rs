@@ -174,12 +174,7 @@ impl Forecaster {
         } else {
             1
         };
-        if self.masks.len() != mask_count || self.masks.first().map(BitMask::size) != Some(sensor) {
-            self.masks = (0..mask_count)
-                .map(|_| BitMask::new(sensor))
-                .collect::<Result<_, _>>()
-                .map_err(mask_error)?;
-        }
+        reuse_or_allocate(&mut self.masks, mask_count, sensor).map_err(mask_error)?;
         let (row_stride, height) = (output.width(), output.height());
         let (rule, downsample) = (self.rule, self.downsample);
         let logits = std::iter::once(output.mask_logits()).chain(output.future_mask_logits());
@@ -190,15 +185,8 @@ impl Forecaster {
         if keeps_the_forecast {
             self.keep.clear();
         } else {
-            let horizon_count = output.horizon_count();
-            if self.keep.len() != horizon_count
-                || self.keep.first().map(BitMask::size) != Some(sensor)
-            {
-                self.keep = (0..horizon_count)
-                    .map(|_| BitMask::new(sensor))
-                    .collect::<Result<_, _>>()
-                    .map_err(mask_error)?;
-            }
+            reuse_or_allocate(&mut self.keep, output.horizon_count(), sensor)
+                .map_err(mask_error)?;
             for (region, logits) in self.keep.iter_mut().zip(output.future_mask_logits()) {
                 dilate_logits(
                     logits,
@@ -233,6 +221,21 @@ impl Forecaster {
             thresholding,
         })
     }
+}
+
+/// Keeps `masks` when they are `count` masks of `sensor`, else replaces them with blank ones:
+/// a window allocates only when the sensor or the number of horizons changes.
+fn reuse_or_allocate(
+    masks: &mut Vec<BitMask>,
+    count: usize,
+    sensor: SensorSize,
+) -> Result<(), MaskError> {
+    if masks.len() != count || masks.first().map(BitMask::size) != Some(sensor) {
+        *masks = (0..count)
+            .map(|_| BitMask::new(sensor))
+            .collect::<Result<_, _>>()?;
+    }
+    Ok(())
 }
 
 /// The reusable grid for `sensor`, rebuilt (and checked against the model's input) when the
