@@ -5,11 +5,13 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from .network import NetworkConfig, SuppressionNetwork
 
 TIME_CONDITIONING_PREFIX = "time_conditioning."
+FIRST_CONVOLUTION_WEIGHT = "downsamples.0.0.weight"
 
 
 class CheckpointError(ValueError):
@@ -80,6 +82,34 @@ def with_input_normalisation(network: SuppressionNetwork, normalisation: str) ->
     switched = SuppressionNetwork(dataclasses.replace(network.config, input_normalisation=normalisation))
     switched.load_state_dict(network.state_dict())
     return switched
+
+
+def with_input_channels(network: SuppressionNetwork, voxel_bins: int, motion_compensated: bool) -> SuppressionNetwork:
+    """The same network taking `voxel_bins` time bins and, if `motion_compensated`, the
+    compensated event image, with every other weight kept. The first convolution starts out
+    computing nearly what it computed before: a new bin's weights interpolate the old bins' at
+    the new bin's centre (from 2 bins, each old bin's linear time weight is a sum of the new
+    bins' weights, so the response to the raw grid is unchanged; only the standardisation's
+    statistics differ), and a new compensated channel starts at zero weight."""
+    config = dataclasses.replace(
+        network.config, voxel_bins=voxel_bins, motion_compensated_channel=motion_compensated
+    )
+    widened = SuppressionNetwork(config)
+    weights = network.state_dict()
+    first = FIRST_CONVOLUTION_WEIGHT
+    old = weights[first]
+    old_bins = network.config.voxel_bins
+    old_centres = np.linspace(0.0, 1.0, old_bins)
+    new = torch.zeros(old.shape[0], config.input_channels, *old.shape[2:], dtype=old.dtype)
+    for bin_index, centre in enumerate(np.linspace(0.0, 1.0, voxel_bins)):
+        lower = min(int(np.searchsorted(old_centres, centre, side="right")) - 1, old_bins - 2)
+        share = (centre - old_centres[lower]) / (old_centres[lower + 1] - old_centres[lower])
+        new[:, bin_index] = (1.0 - share) * old[:, lower] + share * old[:, lower + 1]
+    if network.config.motion_compensated_channel and motion_compensated:
+        new[:, -1] = old[:, -1]
+    weights[first] = new
+    widened.load_state_dict(weights)
+    return widened
 
 
 def with_time_conditioning(network: SuppressionNetwork, variant: str) -> SuppressionNetwork:

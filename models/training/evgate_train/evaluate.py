@@ -27,10 +27,11 @@ from .checkpoint import load_checkpoint
 from .flow_forecasts import rigid_forecast, splat_forecast
 from .linear_extrapolation import extrapolate
 from .metrics import SequenceScores, frame_scores
-from .network import WARP_RESOLUTIONS, SuppressionNetwork
+from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork
+from .network_input import network_input
 from .onnx_network import OnnxNetwork, load_export
 from .sequence import Sequence, load_sequence
-from .voxel import WINDOW_US, padded, voxel_grid
+from .voxel import WINDOW_US, padded
 
 EVIMO_LIKE = ("boxes", "floor", "wall", "table", "fast")
 log = logging.getLogger("evgate_train.evaluate")
@@ -63,6 +64,8 @@ def evaluate_sequence(
     `flow_variants`, "rigid-<h>ms" and "splat-<h>ms" of `flow_forecasts`); `warp_resolution` as
     the network's (an export's default is "half")."""
     network.eval()
+    # An export takes what the runtime builds: the default input.
+    input_config = network.config if isinstance(network, SuppressionNetwork) else NetworkConfig()
     height, width = padded(sequence.height), padded(sequence.width)
     states = network.initial_states(1, height, width)
     horizons = torch.tensor([horizons_ms], dtype=torch.float32)
@@ -74,7 +77,7 @@ def evaluate_sequence(
             break
         window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
         ts, xs, ys, on = (a[window] for a in (sequence.events_t, sequence.events_x, sequence.events_y, sequence.events_on))
-        voxel = voxel_grid(ts, xs, ys, on, t_end, sequence.width, sequence.height)
+        voxel = network_input(ts, xs, ys, on, t_end, sequence.width, sequence.height, input_config)
         out = network(torch.from_numpy(voxel)[None], horizons, states, warp_resolution=warp_resolution)
         states = out.states
         current = (out.mask_logits[0, 0, : sequence.height, : sequence.width] > 0).numpy()
@@ -190,6 +193,8 @@ def main(argv: list[str] | None = None) -> int:
         return network.warp_resolution if isinstance(network, OnnxNetwork) else args.warp_resolution
 
     results: dict[str, list] = defaultdict(list)
+    # Kept for paired comparisons between models (`paired_comparison`).
+    per_sequence: dict[str, list] = defaultdict(list)
     for path in tqdm(paths, desc="evaluate", unit="seq"):
         sequence = load_sequence(path)
         if keep and sequence.preset not in keep:
@@ -204,7 +209,9 @@ def main(argv: list[str] | None = None) -> int:
                 warp_resolution=warp_resolution_of(checkpoint),
                 flow_variants=args.flow_variants,
             )
-            results[name].append((sequence.preset, {key: s.summary() for key, s in scores.items()}))
+            summaries = {key: s.summary() for key, s in scores.items()}
+            results[name].append((sequence.preset, summaries))
+            per_sequence[name].append({"sequence": str(path), "preset": sequence.preset, "scores": summaries})
     for name, checkpoint in networks:
         report["models"][name] = {
             "checkpoint": str(dict(models)[name]),
@@ -213,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
             "time-conditioning": checkpoint.network.config.time_conditioning,
             "size": checkpoint.network.config.size,
             **aggregate(results[name]),
+            "per-sequence": per_sequence[name],
         }
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(report, indent=2))

@@ -20,7 +20,7 @@ from torch import nn
 from .checkpoint import load_checkpoint
 from .export_network import export_forward
 from .graph_rewrite import split_concatenated_convolutions
-from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork, check_input_size, check_warp_resolution
+from .network import VOXEL_BINS, WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork, check_input_size, check_warp_resolution
 from .voxel import WINDOW_US
 
 MAX_HORIZON_MS = 100
@@ -32,6 +32,19 @@ INPUT_NAMES = ["voxel", "horizons_ms"] + [f"state_{i}" for i in range(STATE_COUN
 OUTPUT_NAMES = ["mask_logits", "future_mask_logits", "future_flow"] + [f"new_state_{i}" for i in range(STATE_COUNT)]
 
 log = logging.getLogger("evgate_train.export")
+
+
+class RuntimeInputError(ValueError):
+    """A network whose input the runtime (evgate-core) does not build."""
+
+
+def check_runtime_input(config: NetworkConfig) -> None:
+    if config.voxel_bins != VOXEL_BINS or config.motion_compensated_channel:
+        raise RuntimeInputError(
+            f"the network takes {config.voxel_bins} voxel bins"
+            + (" and the motion-compensated channel" if config.motion_compensated_channel else "")
+            + f"; the runtime builds only the {VOXEL_BINS}-bin voxel grid (docs/model-contract.md), so it cannot be exported"
+        )
 
 
 class ContractWrapper(nn.Module):
@@ -70,6 +83,7 @@ def export(
     keep_threshold_logit: float | None = None,
 ) -> None:
     check_input_size(height, width)
+    check_runtime_input(network.config)
     # The wrapper must be in eval mode too: the exporter restores the wrapper's mode afterwards,
     # recursively, and a network left in training mode would use batch statistics.
     wrapper = ContractWrapper(network, warp_resolution).eval()
@@ -95,7 +109,7 @@ def export(
         "evgate.model-size": config.size,
         "evgate.base-channels": str(config.base),
         "evgate.state-channels": ",".join(str(c) for c in config.state_channels),
-        "evgate.bins": "2",
+        "evgate.bins": str(VOXEL_BINS),
         "evgate.window-ms": str(WINDOW_US // 1000),
         "evgate.input-height": str(height),
         "evgate.input-width": str(width),

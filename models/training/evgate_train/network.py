@@ -61,6 +61,15 @@ class NetworkConfig:
     attention_heads: int = 4
     residual_blocks: int = 2
     input_normalisation: str = "global"
+    # Time bins of the voxel grid (`voxel.accumulate`); the runtime builds 2.
+    voxel_bins: int = VOXEL_BINS
+    # A last input channel: the window's events warped by the fitted ego-motion
+    # (`motion_compensation`); the runtime does not build it yet.
+    motion_compensated_channel: bool = False
+
+    @property
+    def input_channels(self) -> int:
+        return self.voxel_bins + int(self.motion_compensated_channel)
 
     @property
     def base(self) -> int:
@@ -117,7 +126,7 @@ class SuppressionNetwork(nn.Module):
         channels = config.state_channels
         self.downsamples = nn.ModuleList()
         self.recurrent = nn.ModuleList()
-        previous = VOXEL_BINS
+        previous = config.input_channels
         for stage, width in enumerate(channels):
             # Batch norm speeds up the short CPU training; at export it folds into the conv.
             self.downsamples.append(
@@ -151,7 +160,7 @@ class SuppressionNetwork(nn.Module):
     def forward(
         self, voxel: torch.Tensor, horizons_ms: torch.Tensor, states: list[torch.Tensor], warp_resolution: str = "full"
     ) -> NetworkOutput:
-        """voxel [B, 2, H, W], horizons_ms [B, K], states as `initial_states`; `warp_resolution`
+        """voxel [B, config.input_channels, H, W] (`network_input`), horizons_ms [B, K], states as `initial_states`; `warp_resolution`
         one of `WARP_RESOLUTIONS` (only the future mask logits depend on it)."""
         check_warp_resolution(warp_resolution)
         batch, _, height, width = voxel.shape

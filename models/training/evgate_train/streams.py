@@ -19,7 +19,8 @@ from .batches import WindowBatch, collate
 from .jitter import EventJitter, JitterRanges
 from .sequence import Sequence, load_sequence
 from .voxel import padded
-from .windows import Crop, cropped, draw_horizons, reference_voxel, training_window
+from .network import NetworkConfig
+from .windows import Crop, cropped, draw_horizons, reference_input, training_window
 
 # Sequences loaded ahead of the streams that will need them.
 PREFETCHED_SEQUENCES = 2
@@ -63,6 +64,7 @@ class StreamSampler:
         augment: bool,
         seed: int,
         jitter: JitterRanges | None = None,
+        network: NetworkConfig = NetworkConfig(),
     ):
         if not paths:
             raise StreamSetupError("no training sequences")
@@ -81,6 +83,8 @@ class StreamSampler:
         # crops and horizons as one without: the two can be compared pair by pair.
         self.jitter = jitter
         self.jitter_rng = np.random.default_rng([seed, 1])
+        # The input channels the network takes (`network_input`).
+        self.network = network
         self.order: list[int] = []
         self.position = 0
         self.passes = 0
@@ -156,11 +160,11 @@ class StreamSampler:
                 reference,
                 cursor.crop,
                 draw_horizons(self.rng, self.horizons),
-                reference_voxel(sequence, reference, cursor.augmentation.jitter),
+                reference_input(sequence, reference, cursor.augmentation.jitter, self.network),
                 self.max_events,
                 self.rng,
             )
-            windows.append(apply(window, cursor.augmentation))
+            windows.append(apply(window, cursor.augmentation, self.network.voxel_bins))
         cursor.next_reference += self.windows_per_step
         return windows
 
@@ -173,8 +177,9 @@ class StreamSampler:
         sequence = self._sequence(cursor.sequence)
         return [
             augmented_voxel(
-                cropped(reference_voxel(sequence, reference, cursor.augmentation.jitter), cursor.crop),
+                cropped(reference_input(sequence, reference, cursor.augmentation.jitter, self.network), cursor.crop),
                 cursor.augmentation,
+                self.network.voxel_bins,
             )
             for reference in range(cursor.first_reference, cursor.next_reference)
         ]

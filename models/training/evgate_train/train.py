@@ -30,11 +30,17 @@ import torch
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from tqdm import tqdm
 
-from .checkpoint import load_checkpoint, save_checkpoint, with_input_normalisation, with_time_conditioning
+from .checkpoint import (
+    load_checkpoint,
+    save_checkpoint,
+    with_input_channels,
+    with_input_normalisation,
+    with_time_conditioning,
+)
 from .evaluate import aggregate, evaluate_sequence
 from .input_normalisation import INPUT_NORMALISATIONS
 from .jitter import JitterRanges
-from .network import NetworkConfig, SuppressionNetwork, check_input_size
+from .network import VOXEL_BINS, NetworkConfig, SuppressionNetwork, check_input_size
 from .objective import LossWeights, window_objective
 from .sequence import load_sequence
 from .streams import StreamSampler, StreamStep, preset_of
@@ -135,6 +141,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="how the network rescales its voxel input: global (as given, the default for a new network) "
         "or local (by the RMS of the active cells around each pixel); with --init-from it switches the "
         "checkpoint's network, keeping every weight; with --resume it must match the checkpoint",
+    )
+    parser.add_argument(
+        "--voxel-bins",
+        type=int,
+        help="time bins of the voxel input (2, the runtime's, for a new network); with --init-from the "
+        "checkpoint's first convolution is re-binned so that it starts computing what it computed",
+    )
+    parser.add_argument(
+        "--motion-compensated-channel",
+        action="store_true",
+        help="add the ego-motion-compensated event image as an input channel (training and Python "
+        "evaluation only; the runtime does not build it); with --init-from it starts at zero weight",
     )
     parser.add_argument("--steps", type=int, default=20000, help="optimiser steps (the learning-rate schedule's length)")
     parser.add_argument("--streams", type=int, default=4, help="sequences played side by side (the batch)")
@@ -412,6 +430,16 @@ def train(args: argparse.Namespace) -> Path:
                 f"--input-normalisation {args.input_normalisation}: {checkpoint_path} was trained with "
                 f"{resumed_normalisation}; a resumed run keeps its network"
             )
+        resumed = network.config
+        if (args.voxel_bins or resumed.voxel_bins, args.motion_compensated_channel or resumed.motion_compensated_channel) != (
+            resumed.voxel_bins,
+            resumed.motion_compensated_channel,
+        ):
+            raise TrainingSetupError(
+                f"--voxel-bins {args.voxel_bins} / --motion-compensated-channel: {checkpoint_path} takes "
+                f"{resumed.voxel_bins} bins and motion_compensated_channel={resumed.motion_compensated_channel}; "
+                "a resumed run keeps its network"
+            )
         continuation = checkpoint.continuation
         for records in ("log.jsonl", "val.jsonl"):
             drop_records_after(args.run_dir / records, start_step)
@@ -422,6 +450,10 @@ def train(args: argparse.Namespace) -> Path:
             network = with_time_conditioning(network, args.init_time_conditioning)
         if args.input_normalisation is not None:
             network = with_input_normalisation(network, args.input_normalisation)
+        if args.voxel_bins is not None or args.motion_compensated_channel:
+            network = with_input_channels(
+                network, args.voxel_bins or network.config.voxel_bins, args.motion_compensated_channel
+            )
         config = network.config
         log.info(
             "initialised from %s (%s, %s, %s input normalisation)",
@@ -434,6 +466,8 @@ def train(args: argparse.Namespace) -> Path:
                 size=args.size,
                 time_conditioning=args.time_conditioning,
                 input_normalisation=args.input_normalisation or "global",
+                voxel_bins=args.voxel_bins or VOXEL_BINS,
+                motion_compensated_channel=args.motion_compensated_channel,
             )
         )
     sampler = StreamSampler(
@@ -449,6 +483,7 @@ def train(args: argparse.Namespace) -> Path:
         JitterRanges(args.jitter_max_dropout, args.jitter_max_polarity_flip, args.jitter_min_rate)
         if args.event_jitter
         else None,
+        network.config,
     )
     if continuation is not None:
         sampler.load_state_dict(continuation["data"])

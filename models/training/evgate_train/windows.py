@@ -8,7 +8,9 @@ from scipy import ndimage
 
 from .jitter import EventJitter
 from .sequence import GRID_US, Sequence
-from .voxel import WINDOW_US, voxel_grid
+from .network import NetworkConfig
+from .network_input import network_input
+from .voxel import WINDOW_US
 
 # Evaluation and the headline figures score the forecast at t + 100 ms: every reference time
 # trains it.
@@ -45,7 +47,7 @@ class FutureEvents:
 
 @dataclass
 class TrainingWindow:
-    voxel: np.ndarray  # [2, H, W] float32
+    voxel: np.ndarray  # [C, H, W] float32, the network input (`network_input`)
     mask: np.ndarray  # [H, W] float32, 1 = IMO
     mask_valid: bool  # the reference time has a ground-truth frame
     horizons_ms: np.ndarray  # [K] float32
@@ -68,9 +70,11 @@ def draw_horizons(rng: np.random.Generator, count: int) -> np.ndarray:
     return np.concatenate([[SCORED_HORIZON_MS], np.sort(others)]).astype(np.float32)
 
 
-def reference_voxel(sequence: Sequence, reference: int, jitter: EventJitter = EventJitter()) -> np.ndarray:
-    """The full (padded) voxel grid [2, H, W] of the 50 ms window ending at reference time
-    `reference`, of the events as `jitter` alters them."""
+def reference_input(
+    sequence: Sequence, reference: int, jitter: EventJitter = EventJitter(), config: NetworkConfig = NetworkConfig()
+) -> np.ndarray:
+    """The full (padded) network input [C, H, W] (`network_input`) of the 50 ms window ending at
+    reference time `reference`, of the events as `jitter` alters them."""
     t_end = int(sequence.ref_ts[reference])
     window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
     t, x, y, on = jitter.events(
@@ -82,7 +86,7 @@ def reference_voxel(sequence: Sequence, reference: int, jitter: EventJitter = Ev
         sequence.height,
         reference,
     )
-    return voxel_grid(t, x, y, on, t_end, sequence.width, sequence.height)
+    return network_input(t, x, y, on, t_end, sequence.width, sequence.height, config)
 
 
 def cropped(array: np.ndarray, crop: Crop) -> np.ndarray:
@@ -187,7 +191,7 @@ def training_window(
     max_events: int,
     rng: np.random.Generator,
 ) -> TrainingWindow:
-    """`full_voxel` is `reference_voxel(sequence, reference)`; future events (for contrast
+    """`full_voxel` is `reference_input(sequence, reference)`; future events (for contrast
     maximisation) are drawn only when `max_events` > 0."""
     t_end = int(sequence.ref_ts[reference])
     now = sequence.grid_index(t_end)

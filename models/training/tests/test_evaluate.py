@@ -36,6 +36,9 @@ def test_report_is_written_per_preset(synthetic_dir, tmp_path):
     model = report["models"]["xs"]
     assert model["steps"] == 3 and model["size"] == "XS"
     assert model["presets"]["synthetic-test"]["current"]["sequences"] == 2
+    # Per-sequence scores, for paired comparisons between models.
+    assert len(model["per-sequence"]) == 2
+    assert model["per-sequence"][0]["scores"]["current"]["frames"] > 0
 
 
 def test_bad_model_spec_is_explained():

@@ -7,7 +7,7 @@ from evgate_train.augment import Augmentation
 from evgate_train.jitter import EventJitter, JitterRangeError, JitterRanges
 from evgate_train.sequence import load_sequence
 from evgate_train.streams import StreamSampler
-from evgate_train.windows import reference_voxel
+from evgate_train.windows import reference_input
 
 WIDTH, HEIGHT = 96, 64
 
@@ -26,7 +26,7 @@ def test_no_jitter_leaves_the_events_and_the_voxel_grid_alone(synthetic_dir):
     for before, after in zip(events, EventJitter().events(*events, WIDTH, HEIGHT, 3)):
         np.testing.assert_array_equal(before, after)
     sequence = load_sequence(sorted(synthetic_dir.rglob("*.npz"))[0])
-    np.testing.assert_array_equal(reference_voxel(sequence, 2), reference_voxel(sequence, 2, EventJitter()))
+    np.testing.assert_array_equal(reference_input(sequence, 2), reference_input(sequence, 2, EventJitter()))
 
 
 def test_dropout_and_polarity_flips_take_their_shares():

@@ -8,7 +8,7 @@ from evgate_train.augment import Augmentation, apply
 from evgate_train.checkpoint import load_checkpoint
 from evgate_train.sequence import load_sequence
 from evgate_train.train import TrainingSetupError, build_parser, train
-from evgate_train.windows import Crop, HorizonCountError, draw_horizons, reference_voxel, training_window
+from evgate_train.windows import Crop, HorizonCountError, draw_horizons, reference_input, training_window
 
 
 def _args(synthetic_dir, run_dir, steps, *extra):
@@ -90,7 +90,7 @@ def test_flips_move_masks_flow_and_events_alike(synthetic_dir):
     sequence = load_sequence(synthetic_dir / "slide-0.npz")
     rng = np.random.default_rng(0)
     horizons = np.array([100.0, 40.0], np.float32)
-    window = training_window(sequence, 2, FULL_FRAME, horizons, reference_voxel(sequence, 2), 10_000, rng)
+    window = training_window(sequence, 2, FULL_FRAME, horizons, reference_input(sequence, 2), 10_000, rng)
     flipped = apply(window, Augmentation(True, True, True))
     np.testing.assert_array_equal(flipped.mask, window.mask[::-1, ::-1])
     np.testing.assert_array_equal(flipped.voxel, -window.voxel[:, ::-1, ::-1])
@@ -123,7 +123,7 @@ def test_targets_come_from_the_ground_truth_grid(synthetic_dir):
     reference = 2
     t_ms = sequence.ref_ts[reference] / 1000
     horizons = np.array([100.0, 30.0, 5000.0], np.float32)
-    window = training_window(sequence, reference, FULL_FRAME, horizons, reference_voxel(sequence, reference), 0, None)
+    window = training_window(sequence, reference, FULL_FRAME, horizons, reference_input(sequence, reference), 0, None)
     # A horizon beyond the grid is marked invalid rather than trained on an empty mask.
     assert window.future_valid.tolist() == [True, True, False]
     for k, horizon in enumerate(horizons[:2]):
@@ -143,7 +143,7 @@ def test_targets_come_from_the_ground_truth_grid(synthetic_dir):
 def test_a_crop_beyond_the_sensor_is_padded_with_background(synthetic_dir):
     sequence = load_sequence(synthetic_dir / "slide-0.npz")
     crop = Crop(left=0, top=0, height=64, width=112)
-    window = training_window(sequence, 2, crop, draw_horizons(np.random.default_rng(0), 2), reference_voxel(sequence, 2), 0, None)
+    window = training_window(sequence, 2, crop, draw_horizons(np.random.default_rng(0), 2), reference_input(sequence, 2), 0, None)
     assert window.voxel.shape == (2, 64, 112) and window.mask.shape == (64, 112)
     assert not window.voxel[:, 48:].any() and not window.mask[:, 96:].any() and not window.future_mask[:, 48:].any()
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from evgate_train.voxel import EventOutOfSensorError, accumulate, normalise, voxel_grid
+from evgate_train.voxel import BinCountError, EventOutOfSensorError, accumulate, normalise, voxel_grid
 
 
 def test_events_split_linearly_between_the_two_bins_and_grid_is_padded():
@@ -50,3 +50,26 @@ def test_inverting_polarity_negates_the_normalised_grid():
 def test_event_outside_the_sensor_is_reported():
     with pytest.raises(EventOutOfSensorError, match="x = 40, y = 1 lies outside the 30x20 sensor"):
         accumulate(np.array([10]), np.array([40]), np.array([1]), np.array([1]), 50_000, 30, 20)
+
+
+def test_finer_grids_split_each_event_between_the_two_bins_around_its_time():
+    # 5 bins centred at tau = 0, 0.25, 0.5, 0.75, 1: tau = 0.375 lies halfway between bins 1 and 2.
+    t = np.array([18_750, 50_000], np.int64)
+    grid = accumulate(t, np.array([3, 5]), np.array([2, 7]), np.array([1, 0]), 50_000, width=21, height=13, bins=5)
+    assert grid.shape == (5, 16, 32)
+    np.testing.assert_allclose(grid[:, 2, 3], [0.0, 0.5, 0.5, 0.0, 0.0])
+    np.testing.assert_allclose(grid[:, 7, 5], [0.0, 0.0, 0.0, 0.0, -1.0])
+
+
+def test_every_bin_count_keeps_each_events_sign_in_total():
+    rng = np.random.default_rng(3)
+    t = rng.integers(0, 50_001, 500)
+    x, y, on = rng.integers(0, 20, 500), rng.integers(0, 12, 500), rng.integers(0, 2, 500)
+    two = accumulate(t, x, y, on, 50_000, width=20, height=12)
+    for bins in (2, 3, 7):
+        np.testing.assert_allclose(accumulate(t, x, y, on, 50_000, 20, 12, bins).sum(axis=0), two.sum(axis=0), atol=1e-4)
+
+
+def test_fewer_than_two_bins_is_refused():
+    with pytest.raises(BinCountError, match="voxel bins 1: accepted 2 or more"):
+        accumulate(np.array([0]), np.array([0]), np.array([0]), np.array([1]), 50_000, 16, 16, bins=1)
