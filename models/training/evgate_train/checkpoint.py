@@ -96,8 +96,7 @@ def with_input_channels(network: SuppressionNetwork, voxel_bins: int, motion_com
     )
     widened = SuppressionNetwork(config)
     weights = network.state_dict()
-    first = FIRST_CONVOLUTION_WEIGHT
-    old = weights[first]
+    old = weights[FIRST_CONVOLUTION_WEIGHT]
     old_bins = network.config.voxel_bins
     old_centres = np.linspace(0.0, 1.0, old_bins)
     new = torch.zeros(old.shape[0], config.input_channels, *old.shape[2:], dtype=old.dtype)
@@ -107,7 +106,7 @@ def with_input_channels(network: SuppressionNetwork, voxel_bins: int, motion_com
         new[:, bin_index] = (1.0 - share) * old[:, lower] + share * old[:, lower + 1]
     if network.config.motion_compensated_channel and motion_compensated:
         new[:, -1] = old[:, -1]
-    weights[first] = new
+    weights[FIRST_CONVOLUTION_WEIGHT] = new
     widened.load_state_dict(weights)
     return widened
 

@@ -53,7 +53,10 @@ def _sharpness(
 
 def fit_velocity(t: np.ndarray, x: np.ndarray, y: np.ndarray, t_end: int, width: int, height: int) -> np.ndarray:
     """The global velocity (vx, vy) in px/s that sharpens the window's events most."""
-    dt, px, py = _window_events(t, x, y, t_end)
+    return _fitted(*_window_events(t, x, y, t_end), width, height)
+
+
+def _fitted(dt: np.ndarray, px: np.ndarray, py: np.ndarray, width: int, height: int) -> np.ndarray:
     best = np.zeros(2)
     if len(dt) < MIN_FIT_EVENTS:
         return best
@@ -71,8 +74,8 @@ def compensated_image(
 ) -> np.ndarray:
     """The channel [1, padded(height), padded(width)] float32 of the events of
     [t_end - 50 ms, t_end] (see the module's docstring)."""
-    velocity = fit_velocity(t, x, y, t_end, width, height)
     dt, px, py = _window_events(t, x, y, t_end)
+    velocity = _fitted(dt, px, py, width, height)
     wx, wy = px + velocity[0] * dt, py + velocity[1] * dt
     inside = (wx >= 0) & (wx < width) & (wy >= 0) & (wy < height)
     grid_h, grid_w = padded(height), padded(width)

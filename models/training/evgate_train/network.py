@@ -160,8 +160,9 @@ class SuppressionNetwork(nn.Module):
     def forward(
         self, voxel: torch.Tensor, horizons_ms: torch.Tensor, states: list[torch.Tensor], warp_resolution: str = "full"
     ) -> NetworkOutput:
-        """voxel [B, config.input_channels, H, W] (`network_input`), horizons_ms [B, K], states as `initial_states`; `warp_resolution`
-        one of `WARP_RESOLUTIONS` (only the future mask logits depend on it)."""
+        """voxel [B, config.input_channels, H, W] (`network_input`), horizons_ms [B, K], states as
+        `initial_states`; `warp_resolution` one of `WARP_RESOLUTIONS` (only the future mask logits
+        depend on it)."""
         check_warp_resolution(warp_resolution)
         batch, _, height, width = voxel.shape
         horizons = horizons_ms.shape[1]
