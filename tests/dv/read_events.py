@@ -6,6 +6,8 @@ closes the stream (or --timeout-s passes), and prints one JSON object: the senso
 event count, the ON count and the sums of t, x and y, which a test compares with what it
 published. The NetworkReader constructor returns only once the stream header arrived and holds
 the interpreter meanwhile, so a test learns that the connection is up from the server's side.
+The server may still be binding its socket when this starts, so a refused connection is retried
+until the timeout.
 """
 
 import argparse
@@ -17,6 +19,19 @@ import time
 import dv_processing as dv
 
 
+def connect(args: argparse.Namespace, deadline: float) -> "dv.io.NetworkReader":
+    while True:
+        try:
+            if args.unix:
+                return dv.io.NetworkReader(dv.Path(args.unix))
+            return dv.io.NetworkReader("127.0.0.1", args.tcp)
+        except RuntimeError as error:
+            refused = "Connection refused" in str(error) or "No such file" in str(error)
+            if not refused or time.monotonic() >= deadline:
+                raise
+            time.sleep(0.05)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     endpoint = parser.add_mutually_exclusive_group(required=True)
@@ -25,10 +40,10 @@ def main() -> None:
     parser.add_argument("--timeout-s", type=float, default=60.0)
     args = parser.parse_args()
 
-    reader = dv.io.NetworkReader(dv.Path(args.unix)) if args.unix else dv.io.NetworkReader("127.0.0.1", args.tcp)
+    deadline = time.monotonic() + args.timeout_s
+    reader = connect(args, deadline)
     width, height = reader.getEventResolution()
     events = on = sum_t = sum_x = sum_y = 0
-    deadline = time.monotonic() + args.timeout_s
     while reader.isRunning() and time.monotonic() < deadline:
         batch = reader.getNextEventBatch()
         if batch is None:
