@@ -111,6 +111,16 @@ def with_input_channels(network: SuppressionNetwork, voxel_bins: int, motion_com
     return widened
 
 
+def with_flow_upsampling(network: SuppressionNetwork, flow_upsampling: str) -> SuppressionNetwork:
+    """The same network (every weight it has) upsampling its flow as `flow_upsampling` says. The
+    convex upsampling's heads start at zero, where it adds nothing to the bilinear flow, so the
+    outputs stay the same until training opens its gate; leaving it drops those heads."""
+    switched = SuppressionNetwork(dataclasses.replace(network.config, flow_upsampling=flow_upsampling))
+    target = switched.state_dict()
+    switched.load_state_dict({name: w for name, w in network.state_dict().items() if name in target}, strict=False)
+    return switched
+
+
 def with_time_conditioning(network: SuppressionNetwork, variant: str) -> SuppressionNetwork:
     """A network of another time-conditioning variant holding every weight of `network` that the
     variant shares: the rows of an ablation that start from one trained network. Weights the

@@ -34,6 +34,12 @@ class Decoder(nn.Module):
         return [projection(skip) for projection, skip in zip(self.skip_projections, skips)]
 
     def forward(self, features: torch.Tensor, projected_skips: list[torch.Tensor]) -> torch.Tensor:
+        return self.forward_with_features(features, projected_skips)[0]
+
+    def forward_with_features(
+        self, features: torch.Tensor, projected_skips: list[torch.Tensor]
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The prediction and the last level's features, which can guide another output."""
         x = F.relu(self.reduce(features))
         prediction = self.coarse_head(x)
         for conv, head, skip in zip(self.convs, self.heads, projected_skips):
@@ -41,4 +47,4 @@ class Decoder(nn.Module):
             prediction = upsample(prediction)
             x = F.relu(conv(torch.cat([x, prediction], dim=1)) + skip)
             prediction = prediction + head(x)
-        return prediction
+        return prediction, x

@@ -119,6 +119,7 @@ def export(
         "evgate.train-steps": str(train_steps),
         "evgate.warp-resolution": warp_resolution,
         "evgate.flow-stride": str(network.flow_stride),
+        "evgate.flow-upsampling": config.flow_upsampling,
         "evgate.threshold-logit": repr(float(threshold_logit)),
         "evgate.keep-threshold-logit": repr(
             float(threshold_logit if keep_threshold_logit is None else keep_threshold_logit)

@@ -46,7 +46,9 @@ def export_forward(
         new_states.append(x)
     bottleneck = network.residual(x)
     skips = new_states[:-1][::-1]
-    half_mask_logits = network.mask_decoder(bottleneck, network.mask_decoder.project_skips(skips))
+    half_mask_logits, mask_features = network.mask_decoder.forward_with_features(
+        bottleneck, network.mask_decoder.project_skips(skips)
+    )
     # The (shape-preserving) reshape keeps ONNX Runtime from upsampling the one logit channel in
     # its blocked layout, where it is padded to a block of 8 channels: 8x the work.
     mask_logits = upsample(half_mask_logits.reshape(1, 1, height // 2, width // 2))
@@ -57,13 +59,15 @@ def export_forward(
     coarse_velocity = network.flow_decoder(conditioned, flow_skips)
     coarse_flow = coarse_velocity * horizons_ms.view(-1, 1, 1, 1)
     stride = network.flow_stride
+    # One window: the convex upsampling's guidance [1, ...] broadcasts over the K horizons.
+    guidance = None if network.convex_upsampling is None else network.convex_upsampling.guidance(mask_features)
     if warp_resolution == "full":
-        flow = upsample(coarse_flow, stride)
+        flow = network.upsample_flow(coarse_flow, guidance, to_full=True)
         future = backward_warp(mask_logits.expand(horizons, -1, -1, -1), flow).reshape(1, horizons, height, width)
     else:
         half_height, half_width = half_mask_logits.shape[-2:]
         scale = 0.5 * normalising_scale(half_height, half_width).to(coarse_flow)
-        half_flow = upsample(coarse_flow * scale, stride // 2)  # [K, 2, H / 2, W / 2]
+        half_flow = network.upsample_flow(coarse_flow * scale, guidance, to_full=False)  # [K, 2, H / 2, W / 2]
         grid = pixel_centres(half_height, half_width) - half_flow.permute(0, 2, 3, 1)
         # One map per horizon (a copy): ONNX Runtime's GridSample reuses its per-image sampling
         # plan buffer across the batch, and one stacked K-times-taller grid measured slower.

@@ -16,6 +16,7 @@ from torch import nn
 
 from .convgru import ConvGRU
 from .decoder import Decoder, upsample
+from .flow_upsampling import ConvexUpsampling, check_flow_upsampling
 from .input_normalisation import check_input_normalisation, normalise_input
 from .sizes import STAGES, base_channels, stage_channels
 from .time_conditioning import TimeConditioning, check_variant
@@ -66,6 +67,8 @@ class NetworkConfig:
     # A last input channel: the window's events warped by the fitted ego-motion
     # (`motion_compensation`); the runtime does not build it yet.
     motion_compensated_channel: bool = False
+    # How the coarse flow reaches the mask decoder's resolution (`flow_upsampling`).
+    flow_upsampling: str = "bilinear"
 
     @property
     def input_channels(self) -> int:
@@ -122,6 +125,7 @@ class SuppressionNetwork(nn.Module):
         super().__init__()
         check_variant(config.time_conditioning)
         check_input_normalisation(config.input_normalisation)
+        check_flow_upsampling(config.flow_upsampling)
         self.config = config
         channels = config.state_channels
         self.downsamples = nn.ModuleList()
@@ -147,6 +151,24 @@ class SuppressionNetwork(nn.Module):
             config.attention_width, config.decoder_width, skip_channels[:FLOW_DECODER_LEVELS], 2
         )
         self.flow_stride = 2 ** (STAGES - FLOW_DECODER_LEVELS)
+        # To the mask decoder's (half) resolution, guided by its features.
+        self.convex_upsampling = (
+            ConvexUpsampling(config.decoder_width, self.flow_stride // 2)
+            if config.flow_upsampling == "convex"
+            else None
+        )
+
+    def upsample_flow(
+        self, coarse: torch.Tensor, guidance: tuple[torch.Tensor, torch.Tensor] | None, to_full: bool
+    ) -> torch.Tensor:
+        """Coarse flow [N, 2, H / s, W / s] to half resolution [N, 2, H / 2, W / 2], or with
+        `to_full` to [N, 2, H, W]; `guidance` is `ConvexUpsampling.guidance` for the convex
+        upsampling (whose correction is made at half resolution), None for bilinear."""
+        flow = upsample(coarse, self.flow_stride if to_full else self.flow_stride // 2)
+        if self.convex_upsampling is None:
+            return flow
+        correction = self.convex_upsampling(coarse, *guidance)
+        return flow + (upsample(correction) if to_full else correction)
 
     def initial_states(
         self, batch: int, height: int, width: int, device: torch.device | str = "cpu"
@@ -173,7 +195,9 @@ class SuppressionNetwork(nn.Module):
             new_states.append(x)
         bottleneck = self.residual(x)
         skips = new_states[:-1][::-1]
-        half_mask_logits = self.mask_decoder(bottleneck, self.mask_decoder.project_skips(skips))
+        half_mask_logits, mask_features = self.mask_decoder.forward_with_features(
+            bottleneck, self.mask_decoder.project_skips(skips)
+        )
         mask_logits = upsample(half_mask_logits)
 
         def per_horizon(t: torch.Tensor) -> torch.Tensor:
@@ -183,11 +207,14 @@ class SuppressionNetwork(nn.Module):
         conditioned = self.time_conditioning(per_horizon(self.flow_features(bottleneck)), flat_horizons)
         flow_skips = [per_horizon(s) for s in self.flow_decoder.project_skips(skips[:FLOW_DECODER_LEVELS])]
         coarse_velocity = self.flow_decoder(conditioned, flow_skips)
-        velocity = upsample(coarse_velocity, self.flow_stride)
+        guidance = None
+        if self.convex_upsampling is not None:
+            guidance = tuple(per_horizon(g) for g in self.convex_upsampling.guidance(mask_features))
+        velocity = self.upsample_flow(coarse_velocity, guidance, to_full=True)
         # Upsampling is linear, so scaling by the horizon before it gives the same flow with a
         # full-resolution multiply less per horizon.
         coarse_flow = coarse_velocity * flat_horizons.view(-1, 1, 1, 1)
-        flow = upsample(coarse_flow, self.flow_stride)
+        flow = self.upsample_flow(coarse_flow, guidance, to_full=True)
         if warp_resolution == "full":
             future = backward_warp(per_horizon(mask_logits), flow)
         else:
@@ -195,7 +222,7 @@ class SuppressionNetwork(nn.Module):
             # coarse flow before the (linear) upsampling keeps the multiply off the large map.
             half_height, half_width = half_mask_logits.shape[-2:]
             scale = 0.5 * normalising_scale(half_height, half_width).to(coarse_flow)
-            half_flow = upsample(coarse_flow * scale, self.flow_stride // 2)
+            half_flow = self.upsample_flow(coarse_flow * scale, guidance, to_full=False)
             future = upsample(backward_warp_normalised(per_horizon(half_mask_logits), half_flow))
         return NetworkOutput(
             mask_logits=mask_logits,

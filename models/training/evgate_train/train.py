@@ -34,10 +34,12 @@ from .checkpoint import (
     load_checkpoint,
     save_checkpoint,
     with_input_channels,
+    with_flow_upsampling,
     with_input_normalisation,
     with_time_conditioning,
 )
 from .evaluate import aggregate, evaluate_sequence
+from .flow_upsampling import FLOW_UPSAMPLINGS
 from .input_normalisation import INPUT_NORMALISATIONS
 from .jitter import JitterRanges
 from .network import VOXEL_BINS, NetworkConfig, SuppressionNetwork, check_input_size
@@ -153,6 +155,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="add the ego-motion-compensated event image as an input channel (training and Python "
         "evaluation only; the runtime does not build it); with --init-from it starts at zero weight",
+    )
+    parser.add_argument(
+        "--flow-upsampling",
+        choices=FLOW_UPSAMPLINGS,
+        help="how the coarse flow is upsampled: bilinear (the default for a new network) or convex "
+        "(mask-guided, `flow_upsampling`); with --init-from a convex path is added with its gate closed, "
+        "so the checkpoint's outputs are unchanged at first; with --resume it must match the checkpoint",
     )
     parser.add_argument("--steps", type=int, default=20000, help="optimiser steps (the learning-rate schedule's length)")
     parser.add_argument("--streams", type=int, default=4, help="sequences played side by side (the batch)")
@@ -440,6 +449,11 @@ def train(args: argparse.Namespace) -> Path:
                 f"{resumed.voxel_bins} bins and motion_compensated_channel={resumed.motion_compensated_channel}; "
                 "a resumed run keeps its network"
             )
+        if args.flow_upsampling not in (None, resumed.flow_upsampling):
+            raise TrainingSetupError(
+                f"--flow-upsampling {args.flow_upsampling}: {checkpoint_path} upsamples its flow "
+                f"{resumed.flow_upsampling}; a resumed run keeps its network"
+            )
         continuation = checkpoint.continuation
         for records in ("log.jsonl", "val.jsonl"):
             drop_records_after(args.run_dir / records, start_step)
@@ -454,6 +468,8 @@ def train(args: argparse.Namespace) -> Path:
             network = with_input_channels(
                 network, args.voxel_bins or network.config.voxel_bins, args.motion_compensated_channel
             )
+        if args.flow_upsampling is not None:
+            network = with_flow_upsampling(network, args.flow_upsampling)
         config = network.config
         log.info(
             "initialised from %s (%s, %s, %s input normalisation)",
@@ -468,6 +484,7 @@ def train(args: argparse.Namespace) -> Path:
                 input_normalisation=args.input_normalisation or "global",
                 voxel_bins=args.voxel_bins or VOXEL_BINS,
                 motion_compensated_channel=args.motion_compensated_channel,
+                flow_upsampling=args.flow_upsampling or "bilinear",
             )
         )
     sampler = StreamSampler(

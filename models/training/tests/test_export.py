@@ -15,19 +15,29 @@ from evgate_train.voxel import voxel_grid
 HEIGHT, WIDTH = 48, 96
 
 
-@pytest.fixture(scope="module", params=[("half", "global"), ("full", "global"), ("half", "local")])
+@pytest.fixture(
+    scope="module",
+    params=[
+        ("half", "global", "bilinear"),
+        ("full", "global", "bilinear"),
+        ("half", "local", "bilinear"),
+        ("half", "global", "convex"),
+        ("full", "global", "convex"),
+    ],
+)
 def exported(tmp_path_factory, request):
-    """(network, session, path, warp resolution): parity holds for either warp resolution and
-    either input normalisation."""
+    """(network, session, path, warp resolution): parity holds for either warp resolution,
+    either input normalisation and either flow upsampling."""
     torch.manual_seed(1)
-    warp_resolution, input_normalisation = request.param
-    network = SuppressionNetwork(NetworkConfig(size="XS", input_normalisation=input_normalisation)).eval()
+    warp_resolution, input_normalisation, flow_upsampling = request.param
+    config = NetworkConfig(size="XS", input_normalisation=input_normalisation, flow_upsampling=flow_upsampling)
+    network = SuppressionNetwork(config).eval()
     # Random, non-zero head weights: freshly initialised refinement heads are zero and would
     # leave parts of the graph untested.
     with torch.no_grad():
         for parameter in network.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))
-    path = tmp_path_factory.mktemp("onnx") / f"tiny-{warp_resolution}-{input_normalisation}.onnx"
+    path = tmp_path_factory.mktemp("onnx") / f"tiny-{warp_resolution}-{input_normalisation}-{flow_upsampling}.onnx"
     export(network, path, HEIGHT, WIDTH, manifest_sha256="ab" * 32, train_steps=12, warp_resolution=warp_resolution)
     options = onnxruntime.SessionOptions()
     options.intra_op_num_threads = 1
@@ -49,7 +59,7 @@ def _compare(network, session, warp_resolution: str, voxel: np.ndarray, horizons
 
 
 def test_contract_names_and_metadata(exported):
-    _, session, path, warp_resolution = exported
+    network, session, path, warp_resolution = exported
     assert [i.name for i in session.get_inputs()] == INPUT_NAMES
     assert [o.name for o in session.get_outputs()] == OUTPUT_NAMES
     metadata = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
@@ -61,6 +71,7 @@ def test_contract_names_and_metadata(exported):
     assert metadata["evgate.train-manifest-sha256"] == "ab" * 32
     assert metadata["evgate.warp-resolution"] == warp_resolution
     assert metadata["evgate.flow-stride"] == "8"
+    assert metadata["evgate.flow-upsampling"] == network.config.flow_upsampling
     rule = ("evgate.threshold-logit", "evgate.keep-threshold-logit", "evgate.keep-dilation-px")
     assert tuple(metadata[key] for key in rule) == ("0.0", "0.0", "0")
     # The decoders' convolutions of features + prediction (8 + 1, 8 + 2 channels) were split.

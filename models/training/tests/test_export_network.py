@@ -51,13 +51,21 @@ def test_factorised_attention_equals_per_horizon_copies(variant):
 
 
 @pytest.mark.parametrize(
-    "variant, input_normalisation",
-    [("position-aware", "global"), ("reference", "global"), ("none", "global"), ("position-aware", "local")],
+    "variant, input_normalisation, flow_upsampling",
+    [
+        ("position-aware", "global", "bilinear"),
+        ("reference", "global", "bilinear"),
+        ("none", "global", "bilinear"),
+        ("position-aware", "local", "bilinear"),
+        ("position-aware", "global", "convex"),
+    ],
 )
 @pytest.mark.parametrize("warp_resolution", ["half", "full"])
-def test_export_forward_equals_the_network(variant, input_normalisation, warp_resolution):
+def test_export_forward_equals_the_network(variant, input_normalisation, flow_upsampling, warp_resolution):
     torch.manual_seed(5)
-    config = NetworkConfig(size="XS", time_conditioning=variant, input_normalisation=input_normalisation)
+    config = NetworkConfig(
+        size="XS", time_conditioning=variant, input_normalisation=input_normalisation, flow_upsampling=flow_upsampling
+    )
     network = _perturbed(SuppressionNetwork(config))
     voxel = torch.randn(1, 2, HEIGHT, WIDTH)
     states = [0.5 * torch.randn_like(s) for s in network.initial_states(1, HEIGHT, WIDTH)]

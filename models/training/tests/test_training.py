@@ -253,6 +253,20 @@ def test_input_normalisation_switches_at_init_from_and_stays_on_resume(synthetic
         train(_args(synthetic_dir, run, 3, "--resume", "--input-normalisation", "global"))
 
 
+def test_convex_flow_upsampling_is_added_at_init_from_and_stays_on_resume(synthetic_dir, tmp_path):
+    source = tmp_path / "source"
+    train(_args(synthetic_dir, source, 1))
+    run = tmp_path / "convex"
+    train(_args(synthetic_dir, run, 2, "--init-from", str(source / "checkpoint.pt"), "--flow-upsampling", "convex",
+                "--ema-decay", "0.9", "--stop-at-step", "1"))
+    assert load_checkpoint(run / "checkpoint.pt").network.config.flow_upsampling == "convex"
+    assert load_checkpoint(run / "ema.pt").network.config.flow_upsampling == "convex"
+    train(_args(synthetic_dir, run, 2, "--resume"))
+    assert load_checkpoint(run / "checkpoint.pt").step == 2
+    with pytest.raises(TrainingSetupError, match="--flow-upsampling bilinear: .* upsamples its flow convex"):
+        train(_args(synthetic_dir, run, 3, "--resume", "--flow-upsampling", "bilinear"))
+
+
 def test_the_weight_average_is_saved_resumed_and_averages(synthetic_dir, tmp_path):
     run = tmp_path / "run"
     train(_args(synthetic_dir, run, 2, "--ema-decay", "0.25", "--stop-at-step", "1"))
