@@ -61,13 +61,18 @@ def export_forward(
     stride = network.flow_stride
     # One window: the convex upsampling's guidance [1, ...] broadcasts over the K horizons.
     guidance = None if network.convex_upsampling is None else network.convex_upsampling.guidance(mask_features)
+
+    def upsample_flow(coarse: torch.Tensor, to_full: bool) -> torch.Tensor:
+        correction = None if guidance is None else network.convex_upsampling(coarse, *guidance)
+        return network.upsample_flow(coarse, correction, to_full)
+
     if warp_resolution == "full":
-        flow = network.upsample_flow(coarse_flow, guidance, to_full=True)
+        flow = upsample_flow(coarse_flow, to_full=True)
         future = backward_warp(mask_logits.expand(horizons, -1, -1, -1), flow).reshape(1, horizons, height, width)
     else:
         half_height, half_width = half_mask_logits.shape[-2:]
         scale = 0.5 * normalising_scale(half_height, half_width).to(coarse_flow)
-        half_flow = network.upsample_flow(coarse_flow * scale, guidance, to_full=False)  # [K, 2, H / 2, W / 2]
+        half_flow = upsample_flow(coarse_flow * scale, to_full=False)  # [K, 2, H / 2, W / 2]
         grid = pixel_centres(half_height, half_width) - half_flow.permute(0, 2, 3, 1)
         # One map per horizon (a copy): ONNX Runtime's GridSample reuses its per-image sampling
         # plan buffer across the batch, and one stacked K-times-taller grid measured slower.

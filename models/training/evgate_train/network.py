@@ -158,16 +158,13 @@ class SuppressionNetwork(nn.Module):
             else None
         )
 
-    def upsample_flow(
-        self, coarse: torch.Tensor, guidance: tuple[torch.Tensor, torch.Tensor] | None, to_full: bool
-    ) -> torch.Tensor:
+    def upsample_flow(self, coarse: torch.Tensor, correction: torch.Tensor | None, to_full: bool) -> torch.Tensor:
         """Coarse flow [N, 2, H / s, W / s] to half resolution [N, 2, H / 2, W / 2], or with
-        `to_full` to [N, 2, H, W]; `guidance` is `ConvexUpsampling.guidance` for the convex
-        upsampling (whose correction is made at half resolution), None for bilinear."""
+        `to_full` to [N, 2, H, W]; `correction` is the convex upsampling's (`ConvexUpsampling`, at
+        half resolution) for this coarse flow, None for bilinear."""
         flow = upsample(coarse, self.flow_stride if to_full else self.flow_stride // 2)
-        if self.convex_upsampling is None:
+        if correction is None:
             return flow
-        correction = self.convex_upsampling(coarse, *guidance)
         return flow + (upsample(correction) if to_full else correction)
 
     def initial_states(
@@ -207,14 +204,18 @@ class SuppressionNetwork(nn.Module):
         conditioned = self.time_conditioning(per_horizon(self.flow_features(bottleneck)), flat_horizons)
         flow_skips = [per_horizon(s) for s in self.flow_decoder.project_skips(skips[:FLOW_DECODER_LEVELS])]
         coarse_velocity = self.flow_decoder(conditioned, flow_skips)
-        guidance = None
+        # The convex correction is linear in the coarse flow: made once, for the velocity, and
+        # scaled like the flow for each use.
+        velocity_correction = flow_correction = None
         if self.convex_upsampling is not None:
-            guidance = tuple(per_horizon(g) for g in self.convex_upsampling.guidance(mask_features))
-        velocity = self.upsample_flow(coarse_velocity, guidance, to_full=True)
+            guidance = (per_horizon(g) for g in self.convex_upsampling.guidance(mask_features))
+            velocity_correction = self.convex_upsampling(coarse_velocity, *guidance)
+            flow_correction = velocity_correction * flat_horizons.view(-1, 1, 1, 1)
+        velocity = self.upsample_flow(coarse_velocity, velocity_correction, to_full=True)
         # Upsampling is linear, so scaling by the horizon before it gives the same flow with a
         # full-resolution multiply less per horizon.
         coarse_flow = coarse_velocity * flat_horizons.view(-1, 1, 1, 1)
-        flow = self.upsample_flow(coarse_flow, guidance, to_full=True)
+        flow = self.upsample_flow(coarse_flow, flow_correction, to_full=True)
         if warp_resolution == "full":
             future = backward_warp(per_horizon(mask_logits), flow)
         else:
@@ -222,7 +223,8 @@ class SuppressionNetwork(nn.Module):
             # coarse flow before the (linear) upsampling keeps the multiply off the large map.
             half_height, half_width = half_mask_logits.shape[-2:]
             scale = 0.5 * normalising_scale(half_height, half_width).to(coarse_flow)
-            half_flow = self.upsample_flow(coarse_flow * scale, guidance, to_full=False)
+            half_correction = None if flow_correction is None else flow_correction * scale
+            half_flow = self.upsample_flow(coarse_flow * scale, half_correction, to_full=False)
             future = upsample(backward_warp_normalised(per_horizon(half_mask_logits), half_flow))
         return NetworkOutput(
             mask_logits=mask_logits,

@@ -33,8 +33,8 @@ from tqdm import tqdm
 from .checkpoint import (
     load_checkpoint,
     save_checkpoint,
-    with_input_channels,
     with_flow_upsampling,
+    with_input_channels,
     with_input_normalisation,
     with_time_conditioning,
 )
