@@ -81,11 +81,21 @@ def manifest_digest(path: Path) -> str:
 
 def drop_records_after(path: Path, step: int) -> None:
     """Removes the records of steps past `step` from a JSON-lines log: a run that stopped between
-    two checkpoints logged steps that the resumed run computes again."""
+    two checkpoints logged steps that the resumed run computes again. A run killed mid-write (or
+    by a full disk) leaves a partial last line; it is dropped too."""
     if not path.exists():
         return
     lines = path.read_text().splitlines(keepends=True)
-    kept = [line for line in lines if json.loads(line)["step"] <= step]
+    kept = []
+    for number, line in enumerate(lines, start=1):
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError as error:
+            if number == len(lines):
+                break
+            raise TrainingSetupError(f"{path}: line {number} is not a JSON record ({error})") from error
+        if record["step"] <= step:
+            kept.append(line)
     if len(kept) < len(lines):
         path.write_text("".join(kept))
         log.info("%s: dropped %d records past step %d", path, len(lines) - len(kept), step)

@@ -51,6 +51,26 @@ def test_a_resume_after_a_crash_logs_each_step_once(synthetic_dir, tmp_path):
     assert steps == [1, 2, 3, 4, 5]
 
 
+def test_a_resume_after_a_crash_mid_write_drops_the_partial_line(synthetic_dir, tmp_path):
+    run = tmp_path / "run"
+    train(_args(synthetic_dir, run, 4, "--stop-at-step", "2"))
+    log_path = run / "log.jsonl"
+    log_path.write_text(log_path.read_text() + '{"step": 3, "tot')
+    train(_args(synthetic_dir, run, 4, "--resume"))
+    steps = [json.loads(line)["step"] for line in log_path.read_text().splitlines()]
+    assert steps == [1, 2, 3, 4]
+
+
+def test_a_corrupt_record_before_the_last_line_is_named(tmp_path):
+    from evgate_train.train import drop_records_after
+
+    log_path = tmp_path / "log.jsonl"
+    log_path.write_text('{"step": 1}\nnot json\n{"step": 2}\n')
+    with pytest.raises(TrainingSetupError, match=r"log.jsonl: line 2 is not a JSON record"):
+        drop_records_after(log_path, 1)
+    assert log_path.read_text() == '{"step": 1}\nnot json\n{"step": 2}\n'
+
+
 def test_the_manifest_digest_ignores_wall_times_only(tmp_path):
     from evgate_train.train import manifest_digest
 
