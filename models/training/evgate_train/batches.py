@@ -57,3 +57,17 @@ def collate(windows: list[TrainingWindow]) -> WindowBatch:
         future_events=[w.future_events for w in windows],
         host_horizons_ms=np.stack([w.horizons_ms for w in windows]),
     )
+
+
+def concatenated(batches: list[WindowBatch]) -> WindowBatch:
+    """The batches' windows as one batch, in order."""
+    joined = {}
+    for field in dataclasses.fields(WindowBatch):
+        values = [getattr(batch, field.name) for batch in batches]
+        if isinstance(values[0], torch.Tensor):
+            joined[field.name] = torch.cat(values)
+        elif isinstance(values[0], np.ndarray):
+            joined[field.name] = np.concatenate(values)
+        else:
+            joined[field.name] = [item for value in values for item in value]
+    return WindowBatch(**joined)

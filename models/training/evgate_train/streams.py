@@ -197,6 +197,11 @@ class StreamSampler:
         }
 
     def load_state_dict(self, state: dict) -> None:
+        if "shards" in state:
+            raise StreamSetupError(
+                f"the data cursor was saved by {len(state['shards'])} data workers; this run draws its windows "
+                "in-process: resume with the same --data-workers"
+            )
         if state["paths"] != [str(p) for p in self.paths]:
             raise StreamSetupError(
                 f"the data cursor was saved over {len(state['paths'])} sequences that differ from the "

@@ -23,6 +23,7 @@ import random
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,7 @@ from .input_normalisation import INPUT_NORMALISATIONS
 from .jitter import JitterRanges
 from .network import VOXEL_BINS, NetworkConfig, SuppressionNetwork, check_input_size
 from .objective import LossWeights, window_objective
+from .parallel_streams import ShardedStreams
 from .sequence import load_sequence
 from .streams import StreamSampler, StreamStep, preset_of
 from .time_conditioning import VARIANTS
@@ -101,11 +103,13 @@ def drop_records_after(path: Path, step: int) -> None:
         log.info("%s: dropped %d records past step %d", path, len(lines) - len(kept), step)
 
 
-def learning_rate(step: int, total: int, peak: float, warmup: int) -> float:
-    """Linear warm-up, then cosine decay to a tenth of the peak."""
+def learning_rate(step: int, total: int, peak: float, warmup: int, time_spent: float = 0.0) -> float:
+    """Linear warm-up, then cosine decay to a tenth of the peak. The decay's progress is the
+    larger of the steps done after warm-up and `time_spent` (the share of a time budget used), so
+    a run that its budget ends still anneals."""
     if step < warmup:
         return peak * (step + 1) / warmup
-    progress = min(1.0, (step - warmup) / max(1, total - warmup))
+    progress = min(1.0, max((step - warmup) / max(1, total - warmup), time_spent))
     return peak * (0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * progress)))
 
 
@@ -242,6 +246,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="torch CPU threads; on a shared 2-core machine 1 is several times faster than 2 "
         "(OpenMP workers spin on busy cores)",
     )
+    parser.add_argument(
+        "--data-workers",
+        type=int,
+        default=0,
+        help="processes that build the training windows, each playing an equal share of --streams "
+        "(`parallel_streams`; a GPU's large batch needs several); 0 = one thread beside training. "
+        "A resumed run keeps its count",
+    )
     parser.add_argument("--bf16", action="store_true", help="bfloat16 autocast of the forward pass (CPU AVX-512 BF16)")
     parser.add_argument("--checkpoint-every", type=int, default=50, help="steps between checkpoints")
     parser.add_argument(
@@ -267,7 +279,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--time-budget-s",
         type=float,
         default=0.0,
-        help="end this process after so many seconds of training (the schedule stays that of --steps); 0 = none",
+        help="end this process after so many seconds of training; the learning rate then decays by the larger "
+        "of the share of --steps done and the share of this budget spent (`learning_rate`); 0 = none",
     )
     parser.add_argument(
         "--ema-decay",
@@ -497,7 +510,9 @@ def train(args: argparse.Namespace) -> Path:
                 flow_upsampling=args.flow_upsampling or "bilinear",
             )
         )
-    sampler = StreamSampler(
+    if args.data_workers < 0:
+        raise TrainingSetupError(f"--data-workers {args.data_workers}: must be 0 (in-process) or more")
+    sampler = (StreamSampler if args.data_workers == 0 else partial(ShardedStreams, args.data_workers))(
         paths,
         args.streams,
         args.windows_per_step,
@@ -582,7 +597,8 @@ def train(args: argparse.Namespace) -> Path:
                 last_step = step
                 log.info("time budget of %.0f s spent at step %d", args.time_budget_s, step)
                 break
-            rate = learning_rate(step, args.steps, args.lr, args.warmup)
+            spent = (time.monotonic() - started) / args.time_budget_s if args.time_budget_s > 0 else 0.0
+            rate = learning_rate(step, args.steps, args.lr, args.warmup, spent)
             for group in optimiser.param_groups:
                 group["lr"] = rate
             drawn, cursor = upcoming.result()

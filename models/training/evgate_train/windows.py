@@ -103,6 +103,7 @@ def cropped(array: np.ndarray, crop: Crop) -> np.ndarray:
 class ObjectPlace:
     centroid: np.ndarray  # (x, y)
     touches_border: bool
+    box: tuple[slice, slice]  # rows, columns of the bounding box
 
 
 def object_places(ids: np.ndarray) -> dict[int, ObjectPlace]:
@@ -115,24 +116,56 @@ def object_places(ids: np.ndarray) -> dict[int, ObjectPlace]:
             continue
         object_id = index + 1
         rows, cols = found
-        centroid = ndimage.center_of_mass(ids == object_id)
+        # Within the bounding box: the same centroid as over the frame, at a fraction of the cost.
+        centroid = ndimage.center_of_mass(ids[found] == object_id)
         touches = rows.start == 0 or cols.start == 0 or rows.stop == height or cols.stop == width
-        places[object_id] = ObjectPlace(np.array([centroid[1], centroid[0]], np.float32), touches)
+        places[object_id] = ObjectPlace(
+            np.array([centroid[1] + cols.start, centroid[0] + rows.start], np.float32), touches, found
+        )
     return places
 
 
-def background_flow(sequence: Sequence, reference: int, horizon_ms: float) -> tuple[np.ndarray, np.ndarray]:
-    """The simulator's flow [2, H, W] at the sequence's longest sampled horizon, scaled to
-    `horizon_ms` (the camera's motion is close to constant over 100 ms), and where it is finite."""
+def dilated_object(
+    ids_now: np.ndarray, ids_future: np.ndarray, now: ObjectPlace, future: ObjectPlace, object_id: int
+) -> tuple[tuple[slice, slice], np.ndarray]:
+    """(slices, pixels): an object's footprint at both times dilated by REGION_DILATION_PX,
+    computed inside the union of its two bounding boxes grown by the dilation (it cannot reach
+    further), so each object costs its own size rather than the frame's."""
+    height, width = ids_now.shape
+    top = max(0, min(now.box[0].start, future.box[0].start) - REGION_DILATION_PX)
+    bottom = min(height, max(now.box[0].stop, future.box[0].stop) + REGION_DILATION_PX)
+    left = max(0, min(now.box[1].start, future.box[1].start) - REGION_DILATION_PX)
+    right = min(width, max(now.box[1].stop, future.box[1].stop) + REGION_DILATION_PX)
+    box = (slice(top, bottom), slice(left, right))
+    footprint = (ids_now[box] == object_id) | (ids_future[box] == object_id)
+    return box, ndimage.binary_dilation(footprint, iterations=REGION_DILATION_PX)
+
+
+@dataclass
+class BackgroundFlow:
+    """The simulator's flow [2, H, W] at a reference time's longest sampled horizon, zero where it
+    is not finite; `at` scales it to a horizon (the camera's motion is close to constant over
+    100 ms). Read once per window: the conversion costs more than the scaling of each horizon."""
+
+    flow: np.ndarray
+    valid: np.ndarray  # [H, W] bool: finite
+    sampled_us: float  # 0 when the reference time has no sampled horizon of the grid step or more
+
+    def at(self, horizon_ms: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.sampled_us == 0:
+            return np.zeros_like(self.flow), np.zeros_like(self.valid)
+        return self.flow * np.float32(horizon_ms * 1000.0 / self.sampled_us), self.valid
+
+
+def background_flow(sequence: Sequence, reference: int) -> BackgroundFlow:
     sampled = sequence.horizon_us[reference]
     longest = int(np.argmax(sampled))
     if sampled[longest] < GRID_US:
         shape = (sequence.height, sequence.width)
-        return np.zeros((2, *shape), np.float32), np.zeros(shape, bool)
+        return BackgroundFlow(np.zeros((2, *shape), np.float32), np.zeros(shape, bool), 0.0)
     flow = sequence.future_flow[reference, longest].astype(np.float32).transpose(2, 0, 1)
-    valid = np.isfinite(flow).all(axis=0)
-    scale = horizon_ms * 1000.0 / float(sampled[longest])
-    return np.where(np.isfinite(flow), flow * scale, 0.0).astype(np.float32), valid
+    finite = np.isfinite(flow)
+    return BackgroundFlow(np.where(finite, flow, np.float32(0)), finite.all(axis=0), float(sampled[longest]))
 
 
 def flow_target(
@@ -156,9 +189,9 @@ def flow_target(
     for object_id in now.keys() & future.keys():
         if now[object_id].touches_border or future[object_id].touches_border:
             continue
-        pixels = ndimage.binary_dilation((ids_now == object_id) | (ids_future == object_id), iterations=REGION_DILATION_PX)
-        flow[:, pixels] = (future[object_id].centroid - now[object_id].centroid)[:, None]
-        valid[pixels] = True
+        box, pixels = dilated_object(ids_now, ids_future, now[object_id], future[object_id], object_id)
+        flow[(slice(None), *box)][:, pixels] = (future[object_id].centroid - now[object_id].centroid)[:, None]
+        valid[box][pixels] = True
     return flow, valid, footprint, region
 
 
@@ -205,6 +238,7 @@ def training_window(
     footprints = np.zeros((horizons, *shape), bool)
     regions = np.zeros((horizons, *shape), bool)
     events = []
+    background = background_flow(sequence, reference)
     for k, horizon in enumerate(horizons_ms):
         future = sequence.grid_index(t_end + int(round(horizon * 1000)))
         if future is not None:
@@ -212,7 +246,7 @@ def training_window(
             future_valid[k] = True
             future_mask[k] = ids_future > 0
             flows[k], flow_valid[k], footprints[k], regions[k] = flow_target(
-                ids_now, ids_future, background_flow(sequence, reference, float(horizon))
+                ids_now, ids_future, background.at(float(horizon))
             )
         events.append(future_events(sequence, t_end, float(horizon), crop, max_events, rng) if max_events > 0 else NO_EVENTS)
     mask = (ids_now > 0).astype(np.float32) if ids_now is not None else np.zeros(shape, np.float32)

@@ -315,3 +315,14 @@ def test_without_a_decay_no_average_is_kept(synthetic_dir, tmp_path):
 def test_an_ema_decay_outside_its_range_is_refused(synthetic_dir, tmp_path, decay):
     with pytest.raises(TrainingSetupError, match=f"--ema-decay {float(decay)}: must be 0"):
         train(_args(synthetic_dir, tmp_path / "run", 1, "--ema-decay", decay))
+
+
+def test_a_time_budget_drives_the_decay_when_it_is_further_along_than_the_steps():
+    from evgate_train.train import learning_rate
+
+    assert learning_rate(10, 1000, 1.0, 5) == pytest.approx(learning_rate(10, 1000, 1.0, 5, time_spent=0.001))
+    assert learning_rate(10, 1000, 1.0, 5, time_spent=0.5) == pytest.approx(0.55)
+    assert learning_rate(10, 1000, 1.0, 5, time_spent=1.0) == pytest.approx(0.1)
+    assert learning_rate(999, 1000, 1.0, 5, time_spent=0.0) == pytest.approx(0.1, abs=1e-3)
+    # Warm-up runs on steps whatever the time spent.
+    assert learning_rate(1, 1000, 1.0, 5, time_spent=0.9) == pytest.approx(0.4)

@@ -49,6 +49,14 @@ pub struct SuiteArgs {
     /// default); every PNG in it is used, in name order.
     #[arg(long, default_value = "data/photos")]
     pub photos: PathBuf,
+    /// Generate only the first N sequences of each preset in each split (their seeds and files
+    /// are those of the whole suite): a smaller training set, quickly (default: all).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub per_preset: Option<u64>,
+    /// Sequences simulated at once (each renders on every core; more jobs keep the cores busy
+    /// while others compress and write). The files are the same for any number of jobs.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    pub jobs: u64,
     /// After generating, compare every file's SHA-256 (and every photograph's) with this
     /// manifest of an earlier run; fails listing each difference.
     #[arg(long, value_name = "MANIFEST")]
@@ -318,6 +326,9 @@ struct Manifest {
     version: &'static str,
     generator: String,
     scale: SuiteScale,
+    /// `--per-preset`: the first N sequences of each preset and split; absent for all.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    per_preset: Option<u64>,
     totals: SuiteTotals,
     /// The photographs of the test-ood split, relative to `--photos`, with their SHA-256.
     photographs: Vec<ManifestFile>,
@@ -356,11 +367,18 @@ fn photographs_in(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(photographs)
 }
 
-fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
-    let plan: Vec<SuiteEntry> = suite_plan(args.scale)
+/// The sequences of the suite at `scale` in `splits` (all when empty), the first `per_preset`
+/// of each preset in each split where given.
+fn selected_plan(scale: SuiteScale, splits: &[Split], per_preset: Option<u64>) -> Vec<SuiteEntry> {
+    suite_plan(scale)
         .into_iter()
-        .filter(|entry| args.splits.is_empty() || args.splits.contains(&entry.split))
-        .collect();
+        .filter(|entry| splits.is_empty() || splits.contains(&entry.split))
+        .filter(|entry| per_preset.is_none_or(|count| entry.index < count))
+        .collect()
+}
+
+fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
+    let plan = selected_plan(args.scale, &args.splits, args.per_preset);
     let photographs = if plan.iter().any(|entry| entry.split == Split::TestOod) {
         photographs_in(&args.photos)?
     } else {
@@ -370,57 +388,13 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
         .iter()
         .map(|path| describe_file(path, &args.photos))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let total_us: i64 = plan.iter().map(|e| e.duration_us + e.duration_us / 4).sum();
+    let total_us: i64 = plan.iter().map(progress_weight).sum();
     let bar = progress_bar(
         total_us,
         &format!("suite {} ({} sequences)", args.scale, plan.len()),
     );
     let started = std::time::Instant::now();
-    let sequence_count = plan.len();
-    let mut entries = Vec::with_capacity(sequence_count);
-    let mut done_before = 0i64;
-    for entry in plan {
-        bar.set_message(entry.name.clone());
-        let dir = args.out.join(&entry.name);
-        fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let config = entry.config(&photographs);
-        let options = SequenceOptions {
-            duration_us: entry.duration_us,
-            ..SequenceOptions::default()
-        };
-        let summary = write_sequence(&config, entry.seed, &options, &dir, &mut |done, _| {
-            bar.set_position((done_before + done) as u64);
-        })?;
-        done_before += entry.duration_us + entry.duration_us / 4;
-        // A line per sequence, so the progress shows where the bar is not drawn (a log file).
-        bar.suspend(|| {
-            tracing::info!(
-                sequence = %entry.name,
-                done = entries.len() + 1,
-                of = sequence_count,
-                events = summary.events,
-                wall_s = format!("{:.1}", summary.wall_s),
-                "simulated"
-            )
-        });
-        let files = summary
-            .files
-            .iter()
-            .map(|path| describe_file(path, &args.out))
-            .collect::<anyhow::Result<Vec<_>>>()?;
-        entries.push(ManifestEntry {
-            plan: entry,
-            events: summary.events,
-            object_event_share: summary.object_event_share,
-            on_event_share: summary.on_event_share,
-            events_per_window: summary.events_per_window,
-            object_count: summary.object_count,
-            renders: summary.renders,
-            wall_s: summary.wall_s,
-            files,
-            config,
-        });
-    }
+    let entries = simulate_plan(&plan, &photographs, &args.out, args.jobs as usize, &bar)?;
     bar.finish_and_clear();
     let totals = SuiteTotals {
         sequences: entries.len(),
@@ -439,6 +413,7 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
         version: SUITE_VERSION,
         generator: format!("evgate {}", env!("CARGO_PKG_VERSION")),
         scale: args.scale,
+        per_preset: args.per_preset,
         totals,
         photographs: photograph_files,
         sequences: entries,
@@ -466,6 +441,115 @@ fn run_suite(args: SuiteArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// A sequence's share of the progress bar: its simulated time and a quarter for writing it.
+fn progress_weight(entry: &SuiteEntry) -> i64 {
+    entry.duration_us + entry.duration_us / 4
+}
+
+/// Simulates every sequence of `plan` into `out`, `jobs` at a time, and returns their manifest
+/// entries in plan order. After a failure no further sequence starts; once the running ones
+/// end, the error of the earliest failed sequence in plan order returns.
+fn simulate_plan(
+    plan: &[SuiteEntry],
+    photographs: &[PathBuf],
+    out: &Path,
+    jobs: usize,
+    bar: &ProgressBar,
+) -> anyhow::Result<Vec<ManifestEntry>> {
+    use std::sync::atomic::{AtomicBool, AtomicI64, AtomicUsize, Ordering};
+    use std::sync::Mutex;
+
+    let next = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let finished_us = AtomicI64::new(0);
+    let running_us: Vec<AtomicI64> = (0..jobs).map(|_| AtomicI64::new(0)).collect();
+    let results: Mutex<Vec<(usize, anyhow::Result<ManifestEntry>)>> = Mutex::new(Vec::new());
+    let show_progress = || {
+        let running: i64 = running_us.iter().map(|r| r.load(Ordering::Relaxed)).sum();
+        bar.set_position((finished_us.load(Ordering::Relaxed) + running) as u64);
+    };
+    std::thread::scope(|scope| {
+        for running in &running_us {
+            let (next, failed, finished_us, results) = (&next, &failed, &finished_us, &results);
+            let show_progress = &show_progress;
+            scope.spawn(move || loop {
+                let position = next.fetch_add(1, Ordering::Relaxed);
+                if position >= plan.len() || failed.load(Ordering::Relaxed) {
+                    break;
+                }
+                let entry = &plan[position];
+                let result = simulate_entry(entry, photographs, out, &mut |done| {
+                    running.store(done, Ordering::Relaxed);
+                    show_progress();
+                });
+                running.store(0, Ordering::Relaxed);
+                finished_us.fetch_add(progress_weight(entry), Ordering::Relaxed);
+                show_progress();
+                let mut results = results
+                    .lock()
+                    .unwrap_or_else(|poisoned| poisoned.into_inner());
+                match &result {
+                    Ok(simulated) => bar.suspend(|| {
+                        // A line per sequence, so the progress shows where the bar is not
+                        // drawn (a log file).
+                        tracing::info!(
+                            sequence = %entry.name,
+                            done = results.len() + 1,
+                            of = plan.len(),
+                            events = simulated.events,
+                            wall_s = format!("{:.1}", simulated.wall_s),
+                            "simulated"
+                        )
+                    }),
+                    Err(_) => failed.store(true, Ordering::Relaxed),
+                }
+                results.push((position, result));
+            });
+        }
+    });
+    let mut results = results
+        .into_inner()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    results.sort_by_key(|(position, _)| *position);
+    results.into_iter().map(|(_, result)| result).collect()
+}
+
+/// Simulates one suite sequence into its folder under `out` and describes it for the manifest.
+fn simulate_entry(
+    entry: &SuiteEntry,
+    photographs: &[PathBuf],
+    out: &Path,
+    progress: &mut dyn FnMut(i64),
+) -> anyhow::Result<ManifestEntry> {
+    let dir = out.join(&entry.name);
+    fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let config = entry.config(photographs);
+    let options = SequenceOptions {
+        duration_us: entry.duration_us,
+        ..SequenceOptions::default()
+    };
+    let summary = write_sequence(&config, entry.seed, &options, &dir, &mut |done, _| {
+        progress(done)
+    })?;
+    let files = summary
+        .files
+        .iter()
+        .map(|path| describe_file(path, out))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(ManifestEntry {
+        plan: entry.clone(),
+        events: summary.events,
+        object_event_share: summary.object_event_share,
+        on_event_share: summary.on_event_share,
+        events_per_window: summary.events_per_window,
+        object_count: summary.object_count,
+        renders: summary.renders,
+        wall_s: summary.wall_s,
+        files,
+        config,
+    })
 }
 
 /// The SHA-256 of each file named in the manifest at `path` (sequence files and photographs).
@@ -584,6 +668,7 @@ mod tests {
             version: SUITE_VERSION,
             generator: "test".to_owned(),
             scale: SuiteScale::Small,
+            per_preset: None,
             totals: SuiteTotals {
                 sequences: 0,
                 simulated_s: 0.0,
@@ -615,6 +700,50 @@ mod tests {
             error.contains("photograph moon.png: aa here, bb there"),
             "{error}"
         );
+    }
+
+    #[test]
+    fn per_preset_takes_the_first_sequences_of_each_preset() {
+        let names = |plan: Vec<SuiteEntry>| plan.into_iter().map(|e| e.name).collect::<Vec<_>>();
+        assert_eq!(
+            names(selected_plan(SuiteScale::Full, &[Split::Train], Some(2))),
+            names(selected_plan(SuiteScale::Small, &[Split::Train], None)),
+        );
+        assert_eq!(
+            selected_plan(SuiteScale::Full, &[Split::Val], Some(100)).len(),
+            selected_plan(SuiteScale::Full, &[Split::Val], None).len(),
+        );
+    }
+
+    #[test]
+    fn concurrent_jobs_write_the_same_files_in_plan_order() {
+        let plan: Vec<SuiteEntry> = selected_plan(SuiteScale::Full, &[Split::Val], Some(1))
+            .into_iter()
+            .filter(|entry| entry.preset != Preset::Driving)
+            .take(4)
+            .map(|entry| SuiteEntry {
+                duration_us: 200_000,
+                ..entry
+            })
+            .collect();
+        let root = tempfile::tempdir().unwrap();
+        let hashes = |jobs: usize| {
+            let out = root.path().join(jobs.to_string());
+            let entries = simulate_plan(&plan, &[], &out, jobs, &ProgressBar::hidden()).unwrap();
+            entries
+                .iter()
+                .flat_map(|entry| {
+                    entry
+                        .files
+                        .iter()
+                        .map(|file| (file.path.clone(), file.sha256.clone()))
+                })
+                .collect::<Vec<_>>()
+        };
+        let sequential = hashes(1);
+        assert_eq!(sequential.len(), 2 * plan.len());
+        assert!(sequential[0].0.starts_with(&plan[0].name));
+        assert_eq!(hashes(3), sequential);
     }
 
     #[test]
