@@ -6,16 +6,14 @@ is stream s % per_shard of shard s // per_shard. The cursor is every shard's, so
 continues each shard's data stream."""
 
 import dataclasses
+import inspect
 import resource
-from pathlib import Path
 
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
 from .batches import WindowBatch, concatenated
-from .jitter import JitterRanges
-from .network import NetworkConfig
 from .streams import StreamSampler, StreamSetupError, StreamStep
 
 # Steps each worker builds ahead of the one being trained on.
@@ -58,21 +56,10 @@ class ShardedStreams:
     """A `StreamSampler` of `streams` streams (the same step, state_dict, load_state_dict and
     played_voxels) whose steps are built by `workers` processes."""
 
-    def __init__(
-        self,
-        workers: int,
-        paths: list[Path],
-        streams: int,
-        windows_per_step: int,
-        crop_height: int,
-        crop_width: int,
-        horizons: int,
-        max_events: int,
-        augment: bool,
-        seed: int,
-        jitter: JitterRanges | None = None,
-        network: NetworkConfig = NetworkConfig(),
-    ):
+    def __init__(self, workers: int, *sampler_args, **sampler_kwargs):
+        """`workers` processes; the other arguments are `StreamSampler`'s, for all the streams."""
+        arguments = inspect.signature(StreamSampler).bind(*sampler_args, **sampler_kwargs).arguments
+        streams = arguments["streams"]
         if workers < 1 or streams % workers != 0:
             raise StreamSetupError(
                 f"{streams} streams over {workers} data workers: the streams must split evenly between the "
@@ -80,15 +67,11 @@ class ShardedStreams:
             )
         self.workers = workers
         self.streams = streams
-        self.windows_per_step = windows_per_step
-        self.crop_height, self.crop_width = crop_height, crop_width
+        self.windows_per_step = arguments["windows_per_step"]
+        self.crop_height, self.crop_width = arguments["crop_height"], arguments["crop_width"]
         self.streams_per_shard = streams // workers
         self.sampler_arguments = [
-            dict(
-                paths=paths, streams=self.streams_per_shard, windows_per_step=windows_per_step,
-                crop_height=crop_height, crop_width=crop_width, horizons=horizons, max_events=max_events,
-                augment=augment, seed=shard_seed(seed, shard), jitter=jitter, network=network,
-            )
+            {**arguments, "streams": self.streams_per_shard, "seed": shard_seed(arguments["seed"], shard)}
             for shard in range(workers)
         ]
         # In this process the shards only replay what a resumed run played (`played_voxels`);
