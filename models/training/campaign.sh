@@ -13,17 +13,18 @@
 # It keeps an exponential moving average of the weights (decay 0.999) in ema.pt beside the
 # checkpoint, to choose on val between the averaged and the last weights. The shipped S is the
 # average of run S-v5c-6k at the end of its 6000-step schedule (which continued run
-# S-v5c-jitter-pos1 from its step 4000); STEPS=N continues it on the cosine schedule of N steps
-# (the rate jumps to where that schedule stands at step 6000).
+# S-v5c-jitter-pos1 from its step 4000). Run S-v5c-8k, the default, continues S-v5c-6k on an
+# 8000-step cosine schedule (the rate jumped to where that schedule stands at step 6000); its
+# folder began as a copy of S-v5c-6k's, which keeps the shipped weights.
 #
-# Environment: RUN (S-v5c-6k), INIT_FROM (../campaign/S-v5c-6k/ema.pt, relative to
-# models/training: the shipped S, for a new RUN; empty: random weights), STEPS (6000: the
+# Environment: RUN (S-v5c-8k), INIT_FROM (../campaign/S-v5c-6k/ema.pt, relative to
+# models/training: the shipped S, for a new RUN; empty: random weights), STEPS (8000: the
 # schedule's length), STOP_AT (0: run to STEPS), THREADS (1). Extra arguments go to
 # evgate_train.train.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
-run=${RUN:-S-v5c-6k}
+run=${RUN:-S-v5c-8k}
 init_from=${INIT_FROM-../campaign/S-v5c-6k/ema.pt}
 evgate=$root/target/release/evgate
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
@@ -38,7 +39,7 @@ if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
             "example cargo clean --profile dev; the release build runs the simulator)." >&2
         exit 1
     fi
-    "$evgate" sim suite --out "$root/data/suite-v5-full" --scale full --splits train
+    "$evgate" sim suite --out "$root/data/suite-v5-full" --scale full --splits train --jobs 2
 fi
 if [[ ! -d $root/data/suite-v5/val ]]; then
     "$evgate" sim suite --out "$root/data/suite-v5" --scale small --splits val
@@ -47,6 +48,6 @@ cd "$root/models/training"
 # Paths stay relative to models/training: the data cursor in the checkpoint names them.
 exec nice -n 19 .venv/bin/python -m evgate_train.train \
     --data ../../data/suite-v5-full/train --manifest ../../data/suite-v5-full/manifest.json \
-    --run-dir "../campaign/$run" --size S --steps "${STEPS:-6000}" --stop-at-step "${STOP_AT:-0}" \
+    --run-dir "../campaign/$run" --size S --steps "${STEPS:-8000}" --stop-at-step "${STOP_AT:-0}" \
     --threads "${THREADS:-1}" --val-data ../../data/suite-v5/val --val-every 500 \
     --checkpoint-every 100 --event-jitter --positive-weight 1 --ema-decay 0.999 --resume ${init_from:+--init-from "$init_from"} "$@"
