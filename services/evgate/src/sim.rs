@@ -480,6 +480,7 @@ fn simulate_plan(
                     break;
                 }
                 let entry = &plan[position];
+                bar.set_message(entry.name.clone());
                 let result = simulate_entry(entry, photographs, out, &mut |done| {
                     running.store(done, Ordering::Relaxed);
                     show_progress();
