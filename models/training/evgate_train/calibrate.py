@@ -8,7 +8,11 @@ Each sequence streams from its start with the recurrent state carried. The forec
 reference time t, at the service's 8 default horizons (12.5, 25, ..., 100 ms), judges the events
 of (t, t + 50 ms]: an event at t + d takes the mask whose interval holds d (the gate's midpoint
 rule). An event is a true positive when kept and labelled as a moving object (events_label > 0).
-Writes the F1 curve over thresholds, the best threshold and the figures at 0 as JSON.
+Precision, recall and F1 are computed per sequence and averaged over sequences, as `evgate eval`
+scores them, so that the threshold chosen is the one that maximises the reported figure; a
+sequence with moving-object events where nothing is kept scores F1 0. The F1 of all events
+pooled is reported beside it (`pooled-f1`). Writes the F1 curve over thresholds, the best
+threshold and the figures at 0 as JSON.
 
 `--dilations 0,1,2` also measures keep regions: each forecast's logits dilated by r pixels (a
 maximum over the (2r + 1)-pixel square around each pixel, as evgate-infer applies
@@ -22,6 +26,7 @@ import argparse
 import json
 import logging
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -97,25 +102,59 @@ def event_logits(network, path: Path, radii: tuple[int, ...] = (0,)) -> tuple[di
     return {radius: np.concatenate(values) for radius, values in logits.items()}, np.concatenate(positives)
 
 
-def f1_curve(logits: np.ndarray, positives: np.ndarray, thresholds: np.ndarray) -> list[dict]:
-    """Precision, recall and F1 of keeping the events whose logit exceeds each threshold."""
+@dataclass
+class SequenceCounts:
+    """One sequence's events kept (logit above each threshold) and moving-object events among
+    them, per threshold, and its moving-object events in all."""
+
+    kept: np.ndarray
+    true_positive: np.ndarray
+    positive: int
+
+
+def sequence_counts(logits: np.ndarray, positives: np.ndarray, thresholds: np.ndarray) -> SequenceCounts:
     order = np.argsort(logits)
     sorted_logits, sorted_positive = logits[order], positives[order]
     # Events at or below a threshold: the count from the left; kept ones are the rest.
-    positive_below = np.concatenate([[0], np.cumsum(sorted_positive)])
-    total_positive = int(positive_below[-1])
+    positive_below = np.concatenate([[0], np.cumsum(sorted_positive, dtype=np.int64)])
+    below = np.searchsorted(sorted_logits, thresholds, side="right")
+    positive = int(positive_below[-1])
+    return SequenceCounts(len(logits) - below, positive - positive_below[below], positive)
+
+
+def f1_curve(counts: list[SequenceCounts], thresholds: np.ndarray) -> list[dict]:
+    """Per threshold, precision, recall and F1 averaged over the sequences where each is
+    defined (precision where something is kept, recall and F1 where moving-object events
+    occur), the F1 of all events pooled, and the events kept."""
+    kept = np.stack([c.kept for c in counts]).astype(np.float64)
+    true_positive = np.stack([c.true_positive for c in counts]).astype(np.float64)
+    positive = np.array([c.positive for c in counts], dtype=np.float64)[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        precision = np.where(kept > 0, true_positive / kept, np.nan)
+        recall = np.where(positive > 0, true_positive / positive, np.nan)
+        f1 = np.where(positive > 0, np.where(kept > 0, 2 * true_positive / (kept + positive), 0.0), np.nan)
+    pooled_kept, pooled_true = kept.sum(axis=0), true_positive.sum(axis=0)
+    pooled_positive = float(positive.sum())
     rows = []
-    for threshold in thresholds:
-        below = int(np.searchsorted(sorted_logits, threshold, side="right"))
-        kept = len(logits) - below
-        true_positive = total_positive - int(positive_below[below])
-        precision = true_positive / kept if kept else 0.0
-        recall = true_positive / total_positive if total_positive else 0.0
-        f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
+    for i, threshold in enumerate(thresholds):
+        denominator = pooled_kept[i] + pooled_positive
         rows.append(
-            {"threshold-logit": float(threshold), "precision": precision, "recall": recall, "f1": f1, "kept": kept}
+            {
+                "threshold-logit": float(threshold),
+                "precision": defined_mean(precision[:, i]),
+                "recall": defined_mean(recall[:, i]),
+                "f1": defined_mean(f1[:, i]),
+                "pooled-f1": float(2 * pooled_true[i] / denominator) if denominator else 0.0,
+                "kept": int(pooled_kept[i]),
+            }
         )
     return rows
+
+
+def defined_mean(values: np.ndarray) -> float:
+    """The mean of the values that are defined; 0 when none is."""
+    defined = values[~np.isnan(values)]
+    return float(defined.mean()) if len(defined) else 0.0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -137,7 +176,8 @@ def main(argv: list[str] | None = None) -> int:
         raise CalibrationError(f"{args.data}: no .npz sequences found")
     network = load_export(args.model, args.threads).network
     height, width = network.input_size
-    logits, positives, skipped = {radius: [] for radius in radii}, [], []
+    counts, skipped = {radius: [] for radius in radii}, []
+    events = moving_object_events = 0
     for path in tqdm(paths, desc="calibrate", unit="seq"):
         size = sequence_size(path)
         if padded(size[0]) != width or padded(size[1]) != height:
@@ -150,14 +190,14 @@ def main(argv: list[str] | None = None) -> int:
         except SequenceFormatError as error:
             raise CalibrationError(str(error)) from error
         for radius in radii:
-            logits[radius].append(sequence_logits[radius])
-        positives.append(sequence_positives)
-    if not positives:
+            counts[radius].append(sequence_counts(sequence_logits[radius], sequence_positives, THRESHOLDS))
+        events += len(sequence_positives)
+        moving_object_events += int(sequence_positives.sum())
+    if not counts[0]:
         raise CalibrationError(f"{args.data}: no sequence pads to the export's {width}x{height} input")
-    all_positives = np.concatenate(positives)
     by_radius = {}
     for radius in radii:
-        radius_curve = f1_curve(np.concatenate(logits.pop(radius)), all_positives, THRESHOLDS)
+        radius_curve = f1_curve(counts.pop(radius), THRESHOLDS)
         by_radius[radius] = {
             "curve": radius_curve,
             "best": max(radius_curve, key=lambda row: row["f1"]),
@@ -170,15 +210,15 @@ def main(argv: list[str] | None = None) -> int:
         "threshold-logit": best["threshold-logit"] + 0.0,
         "keep-threshold-logit": chosen["threshold-logit"] + 0.0,
         "keep-dilation-px": chosen_radius,
-        **{key: chosen[key] for key in ("precision", "recall", "f1", "kept")},
+        **{key: chosen[key] for key in ("precision", "recall", "f1", "pooled-f1", "kept")},
     }
     report = {
         "model": str(args.model),
         "data": str(args.data),
         "sequences": [str(p) for p in paths if str(p) not in skipped],
         "left-out": skipped,
-        "events": int(len(all_positives)),
-        "moving-object-events": int(all_positives.sum()),
+        "events": events,
+        "moving-object-events": moving_object_events,
         "horizons-ms": list(SERVICE_HORIZONS_MS),
         "best": best,
         "at-zero": at_zero,
@@ -206,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
 def summary(row: dict) -> str:
     return (
         f"threshold-logit {row['threshold-logit']:+.2f}: F1 {row['f1']:.3f} "
-        f"(P {row['precision']:.3f}, R {row['recall']:.3f})"
+        f"(P {row['precision']:.3f}, R {row['recall']:.3f}; all events pooled: F1 {row['pooled-f1']:.3f})"
     )
 
 

@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 import torch
 
-from evgate_train.calibrate import CalibrationError, dilated, f1_curve, main, mask_index, parse_radii
+from evgate_train.calibrate import (
+    CalibrationError,
+    dilated,
+    f1_curve,
+    main,
+    mask_index,
+    parse_radii,
+    sequence_counts,
+)
 from evgate_train.export import export
 from evgate_train.network import NetworkConfig, SuppressionNetwork
 from evgate_train.onnx_network import load_export
@@ -20,12 +28,29 @@ def test_events_take_the_mask_of_the_gates_interval_rule():
 def test_the_curve_counts_kept_events_above_each_threshold():
     logits = np.array([-2.0, -1.0, 0.5, 1.0, 3.0])
     positives = np.array([False, True, False, True, True])
-    rows = {row["threshold-logit"]: row for row in f1_curve(logits, positives, np.array([-3.0, 0.0, 0.75, 5.0]))}
+    thresholds = np.array([-3.0, 0.0, 0.75, 5.0])
+    rows = {row["threshold-logit"]: row for row in f1_curve([sequence_counts(logits, positives, thresholds)], thresholds)}
     assert rows[-3.0]["kept"] == 5 and rows[-3.0]["recall"] == 1.0 and rows[-3.0]["precision"] == 0.6
     assert rows[0.0]["kept"] == 3 and rows[0.0]["precision"] == pytest.approx(2 / 3)
     assert rows[0.75]["precision"] == 1.0 and rows[0.75]["recall"] == pytest.approx(2 / 3)
-    assert rows[0.75]["f1"] == pytest.approx(0.8)
-    assert rows[5.0] == {"threshold-logit": 5.0, "precision": 0.0, "recall": 0.0, "f1": 0.0, "kept": 0}
+    assert rows[0.75]["f1"] == rows[0.75]["pooled-f1"] == pytest.approx(0.8)
+    # Nothing kept: precision is undefined, F1 is 0 since moving-object events were missed.
+    assert rows[5.0] == {"threshold-logit": 5.0, "precision": 0.0, "recall": 0.0, "f1": 0.0, "pooled-f1": 0.0, "kept": 0}
+
+
+def test_scores_are_averaged_over_sequences_as_evgate_eval_does():
+    thresholds = np.array([0.0])
+    # A busy sequence, all of it kept and half of it moving objects (F1 2/3), and a sparse one
+    # whose single moving-object event is kept alone (F1 1); one without moving objects, whose
+    # precision is 0 and whose recall and F1 are undefined.
+    busy = sequence_counts(np.ones(100), np.arange(100) < 50, thresholds)
+    sparse = sequence_counts(np.array([1.0, -1.0]), np.array([True, False]), thresholds)
+    static = sequence_counts(np.array([1.0]), np.array([False]), thresholds)
+    (row,) = f1_curve([busy, sparse, static], thresholds)
+    assert row["f1"] == pytest.approx((2 / 3 + 1) / 2)
+    assert row["recall"] == 1.0 and row["precision"] == pytest.approx((0.5 + 1 + 0) / 3)
+    assert row["pooled-f1"] == pytest.approx(2 * 51 / (102 + 51))
+    assert row["kept"] == 102
 
 
 def test_calibration_reports_the_best_threshold_of_an_export(synthetic_dir, tmp_path):
