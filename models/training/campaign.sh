@@ -12,12 +12,11 @@
 # run on the final v5 val (mIoU at t + 100 ms +1.4 [0.4, 2.8] and +1.6 [1.1, 2.2]; model card).
 # It keeps an exponential moving average of the weights (decay 0.999) in ema.pt beside the
 # checkpoint, to choose on val between the averaged and the last weights. The shipped S is the
-# average of run S-v5c-6k at the end of its 6000-step schedule (which continued run
-# S-v5c-jitter-pos1 from its step 4000). Run S-v5c-8k, the default, continues S-v5c-6k on an
-# 8000-step cosine schedule (the rate jumped to where that schedule stands at step 6000); its
-# folder began as a copy of S-v5c-6k's, which keeps the shipped weights.
+# average of run S-v5c-8k, the default, at the end of its 8000-step schedule: it continued run
+# S-v5c-6k from its step 6000 (the rate jumped to where that schedule stands there), which
+# continued run S-v5c-jitter-pos1 from its step 4000.
 #
-# Environment: RUN (S-v5c-8k), INIT_FROM (../campaign/S-v5c-6k/ema.pt, relative to
+# Environment: RUN (S-v5c-8k), INIT_FROM (../campaign/S-v5c-8k/ema.pt, relative to
 # models/training: the shipped S, for a new RUN; empty: random weights), STEPS (8000: the
 # schedule's length), STOP_AT (0: run to STEPS), THREADS (1). Extra arguments go to
 # evgate_train.train.
@@ -25,7 +24,7 @@ set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
 run=${RUN:-S-v5c-8k}
-init_from=${INIT_FROM-../campaign/S-v5c-6k/ema.pt}
+init_from=${INIT_FROM-../campaign/S-v5c-8k/ema.pt}
 evgate=$root/target/release/evgate
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
     # The split is 62.1 GB (docs/simulator.md); a full disk stops the simulator at the last
