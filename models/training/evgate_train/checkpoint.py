@@ -136,3 +136,72 @@ def with_time_conditioning(network: SuppressionNetwork, variant: str) -> Suppres
         raise CheckpointError(f"time-conditioning variant {variant!r} differs outside time conditioning: {outside[:3]}")
     variant_network.load_state_dict(shared, strict=False)
     return variant_network
+
+
+def with_spatial_gru_gates(network: SuppressionNetwork, first_stage: int) -> SuppressionNetwork:
+    """The same network with depthwise-separable 3x3 ConvGRU gates from encoder stage
+    `first_stage` on. A 1x1 gate becomes a depthwise 3x3 whose centre tap is 1, followed by the
+    old 1x1, so the network computes what it computed until training moves the other taps."""
+    current = network.config.first_spatial_gru_stage
+    if first_stage > current:
+        raise CheckpointError(
+            f"first spatial ConvGRU stage {first_stage}: the network already has 3x3 gates from stage "
+            f"{current}, and turning a 3x3 gate into a 1x1 one would change what it computes"
+        )
+    switched = SuppressionNetwork(dataclasses.replace(network.config, first_spatial_gru_stage=first_stage))
+    weights = network.state_dict()
+    for stage in range(first_stage, current):
+        for gate in ("gates", "candidate"):
+            prefix = f"recurrent.{stage}.{gate}."
+            pointwise_weight = weights.pop(prefix + "weight")
+            weights[prefix + "1.weight"] = pointwise_weight
+            weights[prefix + "1.bias"] = weights.pop(prefix + "bias")
+            identity = torch.zeros(pointwise_weight.shape[1], 1, 3, 3, dtype=pointwise_weight.dtype)
+            identity[:, 0, 1, 1] = 1.0
+            weights[prefix + "0.weight"] = identity
+    switched.load_state_dict(weights)
+    return switched
+
+
+MASK_DECODER_PREFIX = "mask_decoder."
+# Tensors that read the mask decoder's features: their new input channels start at zero weight.
+MASK_FEATURE_READERS = ("convex_upsampling.weight_logits.weight", "convex_upsampling.gate.weight")
+
+
+def with_mask_decoder_width(network: SuppressionNetwork, factor: int) -> SuppressionNetwork:
+    """The same network with a mask decoder `factor` times the base width. The old channels
+    keep their weights and read none of the new ones (zero weights), and every head reads the
+    new ones with zero weight, so the outputs are unchanged at first; the new channels' own
+    weights are freshly initialised, so that training can use them at once."""
+    current = network.config.mask_decoder_width_factor
+    if factor < current:
+        raise CheckpointError(
+            f"mask decoder width factor {factor}: the network's is already {current}, and narrowing "
+            "would drop trained channels"
+        )
+    widened = SuppressionNetwork(dataclasses.replace(network.config, mask_decoder_width_factor=factor))
+    old_width = network.config.mask_decoder_width
+    new_width = widened.config.mask_decoder_width
+    weights = widened.state_dict()
+    for name, old in network.state_dict().items():
+        new = weights[name]
+        if new.shape == old.shape:
+            weights[name] = old
+        elif name in MASK_FEATURE_READERS or name.startswith(MASK_DECODER_PREFIX + "coarse_head.") or (
+            name.startswith(MASK_DECODER_PREFIX + "heads.")
+        ):
+            # Heads: one row per output, one column per decoder channel.
+            new.zero_()
+            new[:, :old_width] = old
+        elif name.startswith(MASK_DECODER_PREFIX + "convs.") and old.dim() == 4:
+            # A level's 3x3 convolution reads [features, prediction]: the prediction's columns
+            # follow the (now wider) features.
+            new[:old_width] = 0.0
+            new[:old_width, :old_width] = old[:, :old_width]
+            new[:old_width, new_width:] = old[:, old_width:]
+        else:
+            # Rows of the reduction, the skip projections, the levels' biases and batch norms:
+            # the old channels' values, the new channels' fresh ones.
+            new[:old_width] = old
+    widened.load_state_dict(weights)
+    return widened

@@ -120,6 +120,8 @@ def export(
         "evgate.warp-resolution": warp_resolution,
         "evgate.flow-stride": str(network.flow_stride),
         "evgate.flow-upsampling": config.flow_upsampling,
+        "evgate.mask-decoder-width": str(config.mask_decoder_width),
+        "evgate.first-spatial-gru-stage": str(config.first_spatial_gru_stage),
         "evgate.threshold-logit": repr(float(threshold_logit)),
         "evgate.keep-threshold-logit": repr(
             float(threshold_logit if keep_threshold_logit is None else keep_threshold_logit)

@@ -3,9 +3,10 @@ each requested horizon, a flow that backward-warps the mask logits into the futu
 
 Built for a CPU budget of about 1 GFLOP per window at 346x260: the first encoder stage runs at
 half resolution (a stride-2 stem), the two shallow ConvGRUs use 1x1 gates and the deep ones
-depthwise-separable 3x3 gates, the decoders are narrow (the model's base width), the mask
-decoder ends at half resolution and the flow decoder, run once per horizon, at an eighth; both
-are upsampled bilinearly. Training warps the mask logits at full resolution; the exported graph
+depthwise-separable 3x3 gates, the decoders are narrow (the model's base width; `NetworkConfig`
+can move the first 3x3 stage and widen the mask decoder), the mask decoder ends at half
+resolution and the flow decoder, run once per horizon, at an eighth; both are upsampled
+bilinearly. Training warps the mask logits at full resolution; the exported graph
 warps them at half resolution, where the mask decoder ends (`WARP_RESOLUTIONS`)."""
 
 from dataclasses import dataclass
@@ -30,6 +31,22 @@ class InputSizeError(ValueError):
     """A voxel grid whose height or width is not a multiple of 16."""
 
 
+class ArchitectureError(ValueError):
+    """A mask decoder width factor below 1 or a first spatial ConvGRU stage outside the encoder."""
+
+
+def check_architecture(config: "NetworkConfig") -> None:
+    if config.mask_decoder_width_factor < 1:
+        raise ArchitectureError(
+            f"mask decoder width factor {config.mask_decoder_width_factor}: must be 1 (the base width) or more"
+        )
+    if not 0 <= config.first_spatial_gru_stage <= STAGES:
+        raise ArchitectureError(
+            f"first spatial ConvGRU stage {config.first_spatial_gru_stage}: must be 0 to {STAGES} "
+            f"({STAGES}: 1x1 gates everywhere)"
+        )
+
+
 class WarpResolutionError(ValueError):
     """A warp resolution that is not one of `WARP_RESOLUTIONS`."""
 
@@ -47,8 +64,8 @@ def check_warp_resolution(resolution: str) -> str:
     return resolution
 
 
-# Encoder stages from this index on have 3x3 (depthwise-separable) ConvGRU gates; the shallow,
-# high-resolution ones have 1x1 gates and take their spatial context from the stride-2 convs.
+# The default `NetworkConfig.first_spatial_gru_stage`: the shallow, high-resolution stages keep
+# 1x1 gates, which the CPU budget was drawn around.
 FIRST_SPATIAL_GRU_STAGE = 2
 # The flow decoder runs this many levels above the bottleneck (stride 16 -> 8), then its
 # velocity is upsampled bilinearly: its cost repeats per horizon.
@@ -69,6 +86,12 @@ class NetworkConfig:
     motion_compensated_channel: bool = False
     # How the coarse flow reaches the mask decoder's resolution (`flow_upsampling`).
     flow_upsampling: str = "bilinear"
+    # The mask decoder's width in multiples of the base width. It runs once per window, unlike
+    # the flow decoder, so widening it buys current-instant capacity without a per-horizon cost.
+    mask_decoder_width_factor: int = 1
+    # Encoder stages from this index on have 3x3 (depthwise-separable) ConvGRU gates; the
+    # shallower ones have 1x1 gates and take their spatial context from the stride-2 convs.
+    first_spatial_gru_stage: int = FIRST_SPATIAL_GRU_STAGE
 
     @property
     def input_channels(self) -> int:
@@ -80,7 +103,12 @@ class NetworkConfig:
 
     @property
     def decoder_width(self) -> int:
+        """The flow decoder's width."""
         return self.base
+
+    @property
+    def mask_decoder_width(self) -> int:
+        return self.base * self.mask_decoder_width_factor
 
     @property
     def attention_width(self) -> int:
@@ -126,6 +154,7 @@ class SuppressionNetwork(nn.Module):
         check_variant(config.time_conditioning)
         check_input_normalisation(config.input_normalisation)
         check_flow_upsampling(config.flow_upsampling)
+        check_architecture(config)
         self.config = config
         channels = config.state_channels
         self.downsamples = nn.ModuleList()
@@ -136,12 +165,12 @@ class SuppressionNetwork(nn.Module):
             self.downsamples.append(
                 nn.Sequential(nn.Conv2d(previous, width, 3, stride=2, padding=1), nn.BatchNorm2d(width))
             )
-            self.recurrent.append(ConvGRU(width, width, spatial=stage >= FIRST_SPATIAL_GRU_STAGE))
+            self.recurrent.append(ConvGRU(width, width, spatial=stage >= config.first_spatial_gru_stage))
             previous = width
         self.residual = nn.Sequential(*[ResidualBlock(channels[-1]) for _ in range(config.residual_blocks)])
         skip_channels = channels[:-1][::-1]
         # Ends at the first stage's resolution (half the input); logits are upsampled from there.
-        self.mask_decoder = Decoder(channels[-1], config.decoder_width, skip_channels, 1)
+        self.mask_decoder = Decoder(channels[-1], config.mask_decoder_width, skip_channels, 1)
         self.flow_features = nn.Conv2d(channels[-1], config.attention_width, 1)
         self.time_conditioning = TimeConditioning(
             config.attention_width, config.time_conditioning, config.attention_heads
@@ -153,7 +182,7 @@ class SuppressionNetwork(nn.Module):
         self.flow_stride = 2 ** (STAGES - FLOW_DECODER_LEVELS)
         # To the mask decoder's (half) resolution, guided by its features.
         self.convex_upsampling = (
-            ConvexUpsampling(config.decoder_width, self.flow_stride // 2)
+            ConvexUpsampling(config.mask_decoder_width, self.flow_stride // 2)
             if config.flow_upsampling == "convex"
             else None
         )

@@ -37,13 +37,15 @@ from .checkpoint import (
     with_flow_upsampling,
     with_input_channels,
     with_input_normalisation,
+    with_mask_decoder_width,
+    with_spatial_gru_gates,
     with_time_conditioning,
 )
 from .evaluate import aggregate, evaluate_sequence
 from .flow_upsampling import FLOW_UPSAMPLINGS
 from .input_normalisation import INPUT_NORMALISATIONS
 from .jitter import JitterRanges
-from .network import VOXEL_BINS, NetworkConfig, SuppressionNetwork, check_input_size
+from .network import FIRST_SPATIAL_GRU_STAGE, VOXEL_BINS, NetworkConfig, SuppressionNetwork, check_input_size
 from .objective import LossWeights, window_objective
 from .parallel_streams import ShardedStreams
 from .sequence import load_sequence
@@ -176,6 +178,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="how the coarse flow is upsampled: bilinear (the default for a new network) or convex "
         "(mask-guided, `flow_upsampling`); with --init-from a convex path is added with its gate closed, "
         "so the checkpoint's outputs are unchanged at first; with --resume it must match the checkpoint",
+    )
+    parser.add_argument(
+        "--mask-decoder-width-factor",
+        type=int,
+        help="the mask decoder's width in multiples of the base width (1 for a new network); with "
+        "--init-from the checkpoint's decoder is widened with its outputs unchanged at first; with "
+        "--resume it must match the checkpoint",
+    )
+    parser.add_argument(
+        "--first-spatial-gru-stage",
+        type=int,
+        help="encoder stages from this one on get depthwise-separable 3x3 ConvGRU gates, the others 1x1 "
+        f"({FIRST_SPATIAL_GRU_STAGE} for a new network); with --init-from a 1x1 gate becomes a 3x3 one "
+        "computing the same at first; with --resume it must match the checkpoint",
     )
     parser.add_argument("--steps", type=int, default=20000, help="optimiser steps (the learning-rate schedule's length)")
     parser.add_argument("--streams", type=int, default=4, help="sequences played side by side (the batch)")
@@ -477,6 +493,15 @@ def train(args: argparse.Namespace) -> Path:
                 f"--flow-upsampling {args.flow_upsampling}: {checkpoint_path} upsamples its flow "
                 f"{resumed.flow_upsampling}; a resumed run keeps its network"
             )
+        for flag, value, name in (
+            ("--mask-decoder-width-factor", args.mask_decoder_width_factor, "mask_decoder_width_factor"),
+            ("--first-spatial-gru-stage", args.first_spatial_gru_stage, "first_spatial_gru_stage"),
+        ):
+            if value not in (None, getattr(resumed, name)):
+                raise TrainingSetupError(
+                    f"{flag} {value}: {checkpoint_path} has {name.replace('_', ' ')} {getattr(resumed, name)}; "
+                    "a resumed run keeps its network"
+                )
         continuation = checkpoint.continuation
         for records in ("log.jsonl", "val.jsonl"):
             drop_records_after(args.run_dir / records, start_step)
@@ -493,6 +518,10 @@ def train(args: argparse.Namespace) -> Path:
             )
         if args.flow_upsampling is not None:
             network = with_flow_upsampling(network, args.flow_upsampling)
+        if args.mask_decoder_width_factor is not None:
+            network = with_mask_decoder_width(network, args.mask_decoder_width_factor)
+        if args.first_spatial_gru_stage is not None:
+            network = with_spatial_gru_gates(network, args.first_spatial_gru_stage)
         config = network.config
         log.info(
             "initialised from %s (%s, %s, %s input normalisation)",
@@ -508,6 +537,10 @@ def train(args: argparse.Namespace) -> Path:
                 voxel_bins=args.voxel_bins or VOXEL_BINS,
                 motion_compensated_channel=args.motion_compensated_channel,
                 flow_upsampling=args.flow_upsampling or "bilinear",
+                mask_decoder_width_factor=args.mask_decoder_width_factor or 1,
+                first_spatial_gru_stage=(
+                    FIRST_SPATIAL_GRU_STAGE if args.first_spatial_gru_stage is None else args.first_spatial_gru_stage
+                ),
             )
         )
     if args.data_workers < 0:

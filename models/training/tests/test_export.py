@@ -23,21 +23,26 @@ HEIGHT, WIDTH = 48, 96
         ("half", "local", "bilinear"),
         ("half", "global", "convex"),
         ("full", "global", "convex"),
+        ("half", "global", "wide-spatial"),
     ],
 )
 def exported(tmp_path_factory, request):
     """(network, session, path, warp resolution): parity holds for either warp resolution,
-    either input normalisation and either flow upsampling."""
+    either input normalisation, either flow upsampling, and a wide mask decoder with 3x3 gates
+    in every ConvGRU."""
     torch.manual_seed(1)
-    warp_resolution, input_normalisation, flow_upsampling = request.param
-    config = NetworkConfig(size="XS", input_normalisation=input_normalisation, flow_upsampling=flow_upsampling)
+    warp_resolution, input_normalisation, variant = request.param
+    if variant == "wide-spatial":
+        config = NetworkConfig(size="XS", mask_decoder_width_factor=2, first_spatial_gru_stage=0)
+    else:
+        config = NetworkConfig(size="XS", input_normalisation=input_normalisation, flow_upsampling=variant)
     network = SuppressionNetwork(config).eval()
     # Random, non-zero head weights: freshly initialised refinement heads are zero and would
     # leave parts of the graph untested.
     with torch.no_grad():
         for parameter in network.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))
-    path = tmp_path_factory.mktemp("onnx") / f"tiny-{warp_resolution}-{input_normalisation}-{flow_upsampling}.onnx"
+    path = tmp_path_factory.mktemp("onnx") / f"tiny-{warp_resolution}-{input_normalisation}-{variant}.onnx"
     export(network, path, HEIGHT, WIDTH, manifest_sha256="ab" * 32, train_steps=12, warp_resolution=warp_resolution)
     options = onnxruntime.SessionOptions()
     options.intra_op_num_threads = 1
@@ -72,6 +77,8 @@ def test_contract_names_and_metadata(exported):
     assert metadata["evgate.warp-resolution"] == warp_resolution
     assert metadata["evgate.flow-stride"] == "8"
     assert metadata["evgate.flow-upsampling"] == network.config.flow_upsampling
+    assert metadata["evgate.mask-decoder-width"] == str(network.config.mask_decoder_width)
+    assert metadata["evgate.first-spatial-gru-stage"] == str(network.config.first_spatial_gru_stage)
     rule = ("evgate.threshold-logit", "evgate.keep-threshold-logit", "evgate.keep-dilation-px")
     assert tuple(metadata[key] for key in rule) == ("0.0", "0.0", "0")
     # The decoders' convolutions of features + prediction (8 + 1, 8 + 2 channels) were split.
