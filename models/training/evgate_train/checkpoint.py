@@ -164,8 +164,14 @@ def with_spatial_gru_gates(network: SuppressionNetwork, first_stage: int) -> Sup
 
 
 MASK_DECODER_PREFIX = "mask_decoder."
-# Tensors that read the mask decoder's features: their new input channels start at zero weight.
-MASK_FEATURE_READERS = ("convex_upsampling.weight_logits.weight", "convex_upsampling.gate.weight")
+# Weights that read the mask decoder's features (its heads, the convex upsampling's): their new
+# input channels start at zero weight.
+MASK_FEATURE_READERS = (
+    MASK_DECODER_PREFIX + "coarse_head.weight",
+    MASK_DECODER_PREFIX + "heads.",
+    "convex_upsampling.weight_logits.weight",
+    "convex_upsampling.gate.weight",
+)
 
 
 def with_mask_decoder_width(network: SuppressionNetwork, factor: int) -> SuppressionNetwork:
@@ -187,10 +193,8 @@ def with_mask_decoder_width(network: SuppressionNetwork, factor: int) -> Suppres
         new = weights[name]
         if new.shape == old.shape:
             weights[name] = old
-        elif name in MASK_FEATURE_READERS or name.startswith(MASK_DECODER_PREFIX + "coarse_head.") or (
-            name.startswith(MASK_DECODER_PREFIX + "heads.")
-        ):
-            # Heads: one row per output, one column per decoder channel.
+        elif name.startswith(MASK_FEATURE_READERS):
+            # One row per output, one column per decoder channel.
             new.zero_()
             new[:, :old_width] = old
         elif name.startswith(MASK_DECODER_PREFIX + "convs.") and old.dim() == 4:
