@@ -209,3 +209,61 @@ def with_mask_decoder_width(network: SuppressionNetwork, factor: int) -> Suppres
             new[:old_width] = old
     widened.load_state_dict(weights)
     return widened
+
+
+RECURRENT_PREFIX = "recurrent."
+
+
+def _stacked_chunks(name: str, dim: int) -> int:
+    """How many stage-wide blocks dimension `dim` of encoder weight `name` is made of: a
+    ConvGRU reads [input, hidden] (two blocks), its gate convolution writes [reset, update]
+    (two blocks) and its depthwise taps run over the stacked input; everything else holds one."""
+    if not name.startswith(RECURRENT_PREFIX):
+        return 1
+    if dim == 1:
+        return 2
+    depthwise = name.endswith(".0.weight")
+    return 2 if ".gates" in name or depthwise else 1
+
+
+def _old_indices(new_size: int, chunks: int, old_size: int) -> torch.Tensor:
+    """Where the old channels of a dimension sit in the widened one: the first channels of
+    each of its `chunks` blocks."""
+    new_block, old_block = new_size // chunks, old_size // chunks
+    return torch.cat([torch.arange(old_block) + chunk * new_block for chunk in range(chunks)])
+
+
+def with_encoder_width(network: SuppressionNetwork, encoder_base_channels: int) -> SuppressionNetwork:
+    """The same network with an encoder `encoder_base_channels` wide at its first stage (each
+    stage doubles it). The old channels keep their weights and read the new ones with zero
+    weight, as do the decoders and the flow features, so every output and the old state
+    channels are unchanged at first; the new channels' own weights are freshly initialised, so
+    that they carry features and their readers receive gradient at once."""
+    current = network.config.state_channels[0]
+    if encoder_base_channels < current:
+        raise CheckpointError(
+            f"encoder base channels {encoder_base_channels}: the network's encoder is already {current} "
+            "wide, and narrowing would drop trained channels"
+        )
+    widened = SuppressionNetwork(dataclasses.replace(network.config, encoder_base_channels=encoder_base_channels))
+    weights = widened.state_dict()
+    for name, old in network.state_dict().items():
+        new = weights[name]
+        if new.shape == old.shape:
+            weights[name] = old
+            continue
+        rows = (
+            _old_indices(new.shape[0], _stacked_chunks(name, 0), old.shape[0])
+            if new.shape[0] != old.shape[0]
+            else torch.arange(old.shape[0])
+        )
+        if old.dim() < 2 or new.shape[1] == old.shape[1]:
+            new[rows] = old
+            continue
+        columns = _old_indices(new.shape[1], _stacked_chunks(name, 1), old.shape[1])
+        kept = new[rows]
+        kept.zero_()
+        kept[:, columns] = old
+        new[rows] = kept
+    widened.load_state_dict(weights)
+    return widened

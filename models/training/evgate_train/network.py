@@ -32,7 +32,8 @@ class InputSizeError(ValueError):
 
 
 class ArchitectureError(ValueError):
-    """A mask decoder width factor below 1 or a first spatial ConvGRU stage outside the encoder."""
+    """A mask decoder width factor below 1, a first spatial ConvGRU stage outside the encoder or
+    an encoder narrower than the size's base width."""
 
 
 def check_architecture(config: "NetworkConfig") -> None:
@@ -44,6 +45,11 @@ def check_architecture(config: "NetworkConfig") -> None:
         raise ArchitectureError(
             f"first spatial ConvGRU stage {config.first_spatial_gru_stage}: must be 0 to {STAGES} "
             f"({STAGES}: 1x1 gates everywhere)"
+        )
+    if config.encoder_base_channels is not None and config.encoder_base_channels < config.base:
+        raise ArchitectureError(
+            f"encoder base channels {config.encoder_base_channels}: must be the size's base width "
+            f"({config.base}) or more"
         )
 
 
@@ -92,6 +98,9 @@ class NetworkConfig:
     # Encoder stages from this index on have 3x3 (depthwise-separable) ConvGRU gates; the
     # shallower ones have 1x1 gates and take their spatial context from the stride-2 convs.
     first_spatial_gru_stage: int = FIRST_SPATIAL_GRU_STAGE
+    # The encoder's first-stage width (each stage doubles it); None: the size's base width. The
+    # decoders and the attention keep the base width, so the encoder alone grows.
+    encoder_base_channels: int | None = None
 
     @property
     def input_channels(self) -> int:
@@ -117,7 +126,7 @@ class NetworkConfig:
 
     @property
     def state_channels(self) -> list[int]:
-        return stage_channels(self.base)
+        return stage_channels(self.encoder_base_channels or self.base)
 
 
 @dataclass

@@ -34,6 +34,7 @@ from tqdm import tqdm
 from .checkpoint import (
     load_checkpoint,
     save_checkpoint,
+    with_encoder_width,
     with_flow_upsampling,
     with_input_channels,
     with_input_normalisation,
@@ -192,6 +193,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="encoder stages from this one on get depthwise-separable 3x3 ConvGRU gates, the others 1x1 "
         f"({FIRST_SPATIAL_GRU_STAGE} for a new network); with --init-from a 1x1 gate becomes a 3x3 one "
         "computing the same at first; with --resume it must match the checkpoint",
+    )
+    parser.add_argument(
+        "--encoder-base-channels",
+        type=int,
+        help="the encoder's first-stage width, doubled at each stage (the size's base width for a new "
+        "network); the decoders keep the base width; with --init-from the checkpoint's encoder is widened "
+        "with its outputs unchanged at first; with --resume it must match the checkpoint",
     )
     parser.add_argument("--steps", type=int, default=20000, help="optimiser steps (the learning-rate schedule's length)")
     parser.add_argument("--streams", type=int, default=4, help="sequences played side by side (the batch)")
@@ -502,6 +510,11 @@ def train(args: argparse.Namespace) -> Path:
                     f"{flag} {value}: {checkpoint_path} has {name.replace('_', ' ')} {getattr(resumed, name)}; "
                     "a resumed run keeps its network"
                 )
+        if args.encoder_base_channels not in (None, resumed.state_channels[0]):
+            raise TrainingSetupError(
+                f"--encoder-base-channels {args.encoder_base_channels}: {checkpoint_path} has an encoder "
+                f"{resumed.state_channels[0]} channels wide at its first stage; a resumed run keeps its network"
+            )
         continuation = checkpoint.continuation
         for records in ("log.jsonl", "val.jsonl"):
             drop_records_after(args.run_dir / records, start_step)
@@ -522,6 +535,8 @@ def train(args: argparse.Namespace) -> Path:
             network = with_mask_decoder_width(network, args.mask_decoder_width_factor)
         if args.first_spatial_gru_stage is not None:
             network = with_spatial_gru_gates(network, args.first_spatial_gru_stage)
+        if args.encoder_base_channels is not None:
+            network = with_encoder_width(network, args.encoder_base_channels)
         config = network.config
         log.info(
             "initialised from %s (%s, %s, %s input normalisation)",
@@ -541,6 +556,7 @@ def train(args: argparse.Namespace) -> Path:
                 first_spatial_gru_stage=(
                     FIRST_SPATIAL_GRU_STAGE if args.first_spatial_gru_stage is None else args.first_spatial_gru_stage
                 ),
+                encoder_base_channels=args.encoder_base_channels,
             )
         )
     if args.data_workers < 0:

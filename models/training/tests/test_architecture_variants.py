@@ -1,11 +1,17 @@
-"""A wider mask decoder and 3x3 gates in the shallow ConvGRUs: the two ways issue 18 names of
+"""A wider mask decoder, 3x3 gates in the shallow ConvGRUs and a wider encoder: the ways of
 spending S's latency headroom on the current-instant mask, each added to a trained network
 without changing what it computes."""
 
 import pytest
 import torch
 
-from evgate_train.checkpoint import CheckpointError, with_flow_upsampling, with_mask_decoder_width, with_spatial_gru_gates
+from evgate_train.checkpoint import (
+    CheckpointError,
+    with_encoder_width,
+    with_flow_upsampling,
+    with_mask_decoder_width,
+    with_spatial_gru_gates,
+)
 from evgate_train.network import ArchitectureError, NetworkConfig, SuppressionNetwork
 
 HEIGHT, WIDTH = 32, 48
@@ -87,8 +93,46 @@ def test_both_changes_compose_with_the_convex_path():
     _assert_same_outputs(_outputs(network, voxel, horizons, "half"), _outputs(changed, voxel, horizons, "half"))
 
 
+@pytest.mark.parametrize("first_spatial_stage", [0, 2])
+def test_a_widened_encoder_computes_what_the_narrow_one_did_across_windows(first_spatial_stage):
+    """Two windows in a row, so that the new state channels, which are no longer zero after
+    the first, must still be invisible to the old channels and to every output."""
+    torch.manual_seed(4)
+    narrow = _trained(NetworkConfig(size="XS", first_spatial_gru_stage=first_spatial_stage, flow_upsampling="convex"))
+    wide = with_encoder_width(narrow, 12).eval()
+    assert wide.config.state_channels == [12, 24, 48, 96]
+    assert wide.config.mask_decoder_width == narrow.config.mask_decoder_width
+    horizons = torch.tensor([[10.0, 100.0]])
+    narrow_states, wide_states = narrow.initial_states(1, HEIGHT, WIDTH), wide.initial_states(1, HEIGHT, WIDTH)
+    with torch.no_grad():
+        for _ in range(2):
+            voxel = torch.randn(1, 2, HEIGHT, WIDTH)
+            before = narrow(voxel, horizons, narrow_states, "half")
+            after = wide(voxel, horizons, wide_states, "half")
+            torch.testing.assert_close(after.mask_logits, before.mask_logits)
+            torch.testing.assert_close(after.future_mask_logits, before.future_mask_logits)
+            torch.testing.assert_close(after.future_flow, before.future_flow)
+            for new_state, old_state in zip(after.states, before.states):
+                torch.testing.assert_close(new_state[:, : old_state.shape[1]], old_state)
+                assert new_state[:, old_state.shape[1] :].abs().mean() > 0.01
+            narrow_states, wide_states = before.states, after.states
+
+
+def test_the_new_encoder_channels_reach_the_outputs_after_training():
+    torch.manual_seed(5)
+    wide = with_encoder_width(_trained(NetworkConfig(size="XS")), 16).train()
+    out = wide(torch.randn(2, 2, HEIGHT, WIDTH), torch.tensor([[100.0], [50.0]]), wide.initial_states(2, HEIGHT, WIDTH))
+    (out.mask_logits.square().mean() + out.future_flow.square().mean()).backward()
+    narrow_bottleneck = 8 * 8
+    assert wide.mask_decoder.reduce.weight.grad[:, narrow_bottleneck:].abs().sum() > 0
+    assert wide.flow_features.weight.grad[:, narrow_bottleneck:].abs().sum() > 0
+    assert wide.mask_decoder.skip_projections[-1].weight.grad[:, 8:].abs().sum() > 0
+
+
 def test_changes_that_would_drop_trained_weights_are_refused():
     network = SuppressionNetwork(NetworkConfig(size="XS", mask_decoder_width_factor=2, first_spatial_gru_stage=1))
+    with pytest.raises(CheckpointError, match="encoder base channels 4: the network's encoder is already 8 wide"):
+        with_encoder_width(network, 4)
     with pytest.raises(CheckpointError, match="mask decoder width factor 1: the network's is already 2"):
         with_mask_decoder_width(network, 1)
     with pytest.raises(CheckpointError, match="first spatial ConvGRU stage 2: the network already has 3x3 gates from stage 1"):
@@ -101,6 +145,7 @@ def test_changes_that_would_drop_trained_weights_are_refused():
         (NetworkConfig(size="XS", mask_decoder_width_factor=0), "mask decoder width factor 0: must be 1"),
         (NetworkConfig(size="XS", first_spatial_gru_stage=5), r"first spatial ConvGRU stage 5: must be 0 to 4"),
         (NetworkConfig(size="XS", first_spatial_gru_stage=-1), r"first spatial ConvGRU stage -1: must be 0 to 4"),
+        (NetworkConfig(size="S", encoder_base_channels=12), r"encoder base channels 12: must be the size's base width \(16\)"),
     ],
 )
 def test_an_impossible_architecture_is_named(config, message):

@@ -28,12 +28,12 @@ HEIGHT, WIDTH = 48, 96
 )
 def exported(tmp_path_factory, request):
     """(network, session, path, warp resolution): parity holds for either warp resolution,
-    either input normalisation, either flow upsampling, and a wide mask decoder with 3x3 gates
-    in every ConvGRU."""
+    either input normalisation, either flow upsampling, and a wide encoder and mask decoder with
+    3x3 gates in every ConvGRU."""
     torch.manual_seed(1)
     warp_resolution, input_normalisation, variant = request.param
     if variant == "wide-spatial":
-        config = NetworkConfig(size="XS", mask_decoder_width_factor=2, first_spatial_gru_stage=0)
+        config = NetworkConfig(size="XS", mask_decoder_width_factor=2, first_spatial_gru_stage=0, encoder_base_channels=12)
     else:
         config = NetworkConfig(size="XS", input_normalisation=input_normalisation, flow_upsampling=variant)
     network = SuppressionNetwork(config).eval()
@@ -69,7 +69,7 @@ def test_contract_names_and_metadata(exported):
     assert [o.name for o in session.get_outputs()] == OUTPUT_NAMES
     metadata = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
     assert metadata["evgate.model-size"] == "XS"
-    assert metadata["evgate.state-channels"] == "8,16,32,64"
+    assert metadata["evgate.state-channels"] == ("12,24,48,96" if network.config.encoder_base_channels else "8,16,32,64")
     assert (metadata["evgate.input-height"], metadata["evgate.input-width"]) == ("48", "96")
     assert metadata["evgate.atc"] == "position-aware"
     assert metadata["evgate.train-steps"] == "12"

@@ -287,21 +287,24 @@ def test_convex_flow_upsampling_is_added_at_init_from_and_stays_on_resume(synthe
         train(_args(synthetic_dir, run, 3, "--resume", "--flow-upsampling", "bilinear"))
 
 
-def test_a_wider_mask_decoder_and_3x3_gates_are_added_at_init_from_and_stay_on_resume(synthetic_dir, tmp_path):
+def test_wider_decoder_and_encoder_and_3x3_gates_are_added_at_init_from_and_stay_on_resume(synthetic_dir, tmp_path):
     source = tmp_path / "source"
     train(_args(synthetic_dir, source, 1))
     run = tmp_path / "wide"
     train(_args(synthetic_dir, run, 2, "--init-from", str(source / "checkpoint.pt"), "--mask-decoder-width-factor", "2",
-                "--first-spatial-gru-stage", "0", "--ema-decay", "0.9", "--stop-at-step", "1"))
+                "--first-spatial-gru-stage", "0", "--encoder-base-channels", "12", "--ema-decay", "0.9",
+                "--stop-at-step", "1"))
     for name in ("checkpoint.pt", "ema.pt"):
         config = load_checkpoint(run / name).network.config
-        assert (config.mask_decoder_width_factor, config.first_spatial_gru_stage) == (2, 0)
+        assert (config.mask_decoder_width_factor, config.first_spatial_gru_stage, config.state_channels[0]) == (2, 0, 12)
     train(_args(synthetic_dir, run, 2, "--resume"))
     assert load_checkpoint(run / "checkpoint.pt").step == 2
     with pytest.raises(TrainingSetupError, match="--mask-decoder-width-factor 1: .* has mask decoder width factor 2"):
         train(_args(synthetic_dir, run, 3, "--resume", "--mask-decoder-width-factor", "1"))
     with pytest.raises(TrainingSetupError, match="--first-spatial-gru-stage 2: .* has first spatial gru stage 0"):
         train(_args(synthetic_dir, run, 3, "--resume", "--first-spatial-gru-stage", "2"))
+    with pytest.raises(TrainingSetupError, match="--encoder-base-channels 8: .* has an encoder 12 channels wide"):
+        train(_args(synthetic_dir, run, 3, "--resume", "--encoder-base-channels", "8"))
 
 
 def test_the_weight_average_is_saved_resumed_and_averages(synthetic_dir, tmp_path):
