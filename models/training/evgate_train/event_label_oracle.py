@@ -1,0 +1,104 @@
+"""How much of the current IMO mask the events themselves show: the ground-truth mask at each
+reference time t scored (as `evaluate` scores a model's current mask) against the pixels of the
+events labelled IMO in the last S ms before t, dilated by r pixels.
+
+    python -m evgate_train.event_label_oracle --data ../../data/suite-v5-full-eval/val \\
+        --output runs/event-label-oracle-val.json
+
+The oracle knows every event's label, which no model does, but it sees only where events fell:
+object interiors without texture stay empty, and a long span smears a moving object over its
+trail. A model's current mask above the oracle's IMO IoU is filling in what the events leave out.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+from tqdm import tqdm
+
+from .evaluate import aggregate
+from .metrics import SequenceScores, frame_scores
+from .sequence import Sequence, SequenceFormatError, load_sequence
+from .timings import print_and_save
+from .voxel import WINDOW_US
+
+SPANS_MS = (5, 10, 20, 50)
+DILATIONS_PX = (0, 1, 2, 4, 8)
+
+
+class OracleInputError(ValueError):
+    """A sequence without per-event labels, or a span or dilation out of range."""
+
+
+def oracle_key(span_ms: int, dilation_px: int) -> str:
+    return f"labelled-{span_ms}ms-r{dilation_px}"
+
+
+def score_sequence(sequence: Sequence, spans_ms: list[int], dilations_px: list[int]) -> dict[str, SequenceScores]:
+    if sequence.events_label is None:
+        raise OracleInputError(f"{sequence.path}: no events_label array; the oracle needs each event's label")
+    scores = {oracle_key(s, r): SequenceScores() for s in spans_ms for r in dilations_px}
+    for reference in sequence.ref_ts:
+        t_end = int(reference)
+        now = sequence.grid_index(t_end)
+        if now is None:
+            continue
+        window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
+        event_pixels = np.zeros((sequence.height, sequence.width), dtype=bool)
+        event_pixels[sequence.events_y[window], sequence.events_x[window]] = True
+        for span_ms in spans_ms:
+            span = sequence.event_range(t_end - span_ms * 1000, t_end + 1)
+            labelled = sequence.events_label[span] > 0
+            imo_pixels = np.zeros_like(event_pixels)
+            imo_pixels[sequence.events_y[span][labelled], sequence.events_x[span][labelled]] = True
+            for dilation_px in dilations_px:
+                predicted = ndimage.binary_dilation(imo_pixels, iterations=dilation_px) if dilation_px else imo_pixels
+                scores[oracle_key(span_ms, dilation_px)].add(frame_scores(predicted, sequence.masks[now], event_pixels))
+    return scores
+
+
+def parse_list(flag: str, value: str, low: int, high: int) -> list[int]:
+    try:
+        values = [int(v) for v in value.split(",") if v]
+    except ValueError:
+        raise OracleInputError(f"{flag} {value!r}: expected comma-separated integers") from None
+    bad = [v for v in values if not low <= v <= high]
+    if not values or bad:
+        raise OracleInputError(f"{flag} {value!r}: each value must be {low} to {high}")
+    return values
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--data", type=Path, required=True, help="directory searched recursively for .npz sequences")
+    parser.add_argument(
+        "--spans-ms", default=",".join(map(str, SPANS_MS)), help="comma-separated spans before t, 1 to 50 ms"
+    )
+    parser.add_argument(
+        "--dilations-px", default=",".join(map(str, DILATIONS_PX)), help="comma-separated dilations, 0 to 32 px"
+    )
+    parser.add_argument("--output", type=Path, help="also write the report as JSON here")
+    args = parser.parse_args(argv)
+    try:
+        spans = parse_list("--spans-ms", args.spans_ms, 1, WINDOW_US // 1000)
+        dilations = parse_list("--dilations-px", args.dilations_px, 0, 32)
+        paths = sorted(args.data.rglob("*.npz"))
+        if not paths:
+            raise OracleInputError(f"{args.data}: no .npz sequences found")
+        per_sequence = []
+        for path in tqdm(paths, desc="oracle", unit="seq"):
+            sequence = load_sequence(path)
+            summaries = {key: s.summary() for key, s in score_sequence(sequence, spans, dilations).items()}
+            per_sequence.append((sequence.preset, summaries))
+    except (OracleInputError, SequenceFormatError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    report = {"data": str(args.data), "spans-ms": spans, "dilations-px": dilations, **aggregate(per_sequence)}
+    print_and_save(report, args.output)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
