@@ -228,7 +228,7 @@ def _stacked_chunks(name: str, dim: int) -> int:
 
 def _old_indices(new_size: int, chunks: int, old_size: int) -> torch.Tensor:
     """Where the old channels of a dimension sit in the widened one: the first channels of
-    each of its `chunks` blocks."""
+    each of its `chunks` blocks (all of them where the dimension did not grow)."""
     new_block, old_block = new_size // chunks, old_size // chunks
     return torch.cat([torch.arange(old_block) + chunk * new_block for chunk in range(chunks)])
 
@@ -252,18 +252,12 @@ def with_encoder_width(network: SuppressionNetwork, encoder_base_channels: int) 
         if new.shape == old.shape:
             weights[name] = old
             continue
-        rows = (
-            _old_indices(new.shape[0], _stacked_chunks(name, 0), old.shape[0])
-            if new.shape[0] != old.shape[0]
-            else torch.arange(old.shape[0])
-        )
+        rows = _old_indices(new.shape[0], _stacked_chunks(name, 0), old.shape[0])
         if old.dim() < 2 or new.shape[1] == old.shape[1]:
             new[rows] = old
             continue
         columns = _old_indices(new.shape[1], _stacked_chunks(name, 1), old.shape[1])
-        kept = new[rows]
-        kept.zero_()
-        kept[:, columns] = old
-        new[rows] = kept
+        new[rows] = 0.0
+        new[rows[:, None], columns] = old
     widened.load_state_dict(weights)
     return widened

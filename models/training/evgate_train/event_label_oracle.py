@@ -1,6 +1,7 @@
 """How much of the current IMO mask the events themselves show: the ground-truth mask at each
 reference time t scored (as `evaluate` scores a model's current mask) against the pixels of the
-events labelled IMO in the last S ms before t, dilated by r pixels.
+events labelled IMO in the last S ms before t, dilated r times by the 4-connected cross (a
+diamond of radius r, not the keep rule's square).
 
     python -m evgate_train.event_label_oracle --data ../../data/suite-v5-full-eval/val \\
         --output runs/event-label-oracle-val.json
@@ -77,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         "--spans-ms", default=",".join(map(str, SPANS_MS)), help="comma-separated spans before t, 1 to 50 ms"
     )
     parser.add_argument(
-        "--dilations-px", default=",".join(map(str, DILATIONS_PX)), help="comma-separated dilations, 0 to 32 px"
+        "--dilations-px", default=",".join(map(str, DILATIONS_PX)), help="comma-separated 4-connected dilation radii, 0 to 32 px"
     )
     parser.add_argument("--output", type=Path, help="also write the report as JSON here")
     args = parser.parse_args(argv)
