@@ -14,7 +14,17 @@ from .voxel import BINS
 from .windows import FutureEvents, TrainingWindow
 
 # [..., H, W] fields of a TrainingWindow that flip with the image.
-SPATIAL_FIELDS = ("voxel", "mask", "future_mask", "footprint", "future_flow", "flow_valid", "object_region")
+SPATIAL_FIELDS = (
+    "voxel",
+    "mask",
+    "fired",
+    "future_mask",
+    "future_fired",
+    "footprint",
+    "future_flow",
+    "flow_valid",
+    "object_region",
+)
 
 
 @dataclass(frozen=True)

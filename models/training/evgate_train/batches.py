@@ -14,9 +14,11 @@ class WindowBatch:
     voxel: torch.Tensor  # [B, 2, H, W]
     mask: torch.Tensor  # [B, 1, H, W]
     mask_valid: torch.Tensor  # [B] bool
+    fired: torch.Tensor  # [B, 1, H, W] bool
     horizons_ms: torch.Tensor  # [B, K]
     future_mask: torch.Tensor  # [B, K, H, W]
     future_valid: torch.Tensor  # [B, K] bool
+    future_fired: torch.Tensor  # [B, K, H, W] bool
     footprint: torch.Tensor  # [B, K, H, W] bool
     future_flow: torch.Tensor  # [B, K, 2, H, W]
     flow_valid: torch.Tensor  # [B, K, H, W] bool
@@ -47,9 +49,11 @@ def collate(windows: list[TrainingWindow]) -> WindowBatch:
         voxel=stack("voxel"),
         mask=stack("mask").unsqueeze(1),
         mask_valid=torch.tensor([w.mask_valid for w in windows]),
+        fired=stack("fired").unsqueeze(1),
         horizons_ms=stack("horizons_ms"),
         future_mask=stack("future_mask"),
         future_valid=stack("future_valid"),
+        future_fired=stack("future_fired"),
         footprint=stack("footprint"),
         future_flow=stack("future_flow"),
         flow_valid=stack("flow_valid"),

@@ -7,15 +7,22 @@ CHARBONNIER_EPSILON = 1e-3
 
 
 def bce_dice(
-    logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, dice_weight: float, positive_weight: float = 1.0
+    logits: torch.Tensor,
+    target: torch.Tensor,
+    valid: torch.Tensor,
+    dice_weight: float,
+    positive_weight: float = 1.0,
+    emphasis: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """BCE over valid pixels (IMO pixels weighted by `positive_weight`) plus `dice_weight` x
-    soft Dice loss; tensors share one shape."""
+    """BCE over valid pixels (IMO pixels weighted by `positive_weight`, and each by 1 + its
+    `emphasis` where given) as a weighted mean, plus `dice_weight` x soft Dice loss; tensors
+    share one shape."""
     valid = valid.to(logits.dtype)
     bce = F.binary_cross_entropy_with_logits(
         logits, target, reduction="none", pos_weight=torch.tensor(positive_weight, dtype=logits.dtype, device=logits.device)
     )
-    loss = (bce * valid).sum() / valid.sum().clamp_min(1.0)
+    weight = valid if emphasis is None else valid * (1.0 + emphasis.to(logits.dtype))
+    loss = (bce * weight).sum() / weight.sum().clamp_min(1.0)
     if dice_weight > 0:
         probability = torch.sigmoid(logits) * valid
         overlap = (probability * target).flatten(1).sum(1)

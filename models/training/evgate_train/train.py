@@ -224,6 +224,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--smoothness-weight", type=float, default=0.02, help="Charbonnier smoothness weight (not across object edges)"
     )
+    parser.add_argument(
+        "--fired-pixel-weight",
+        type=float,
+        default=0.0,
+        help="extra mask BCE weight of the pixels with an event within 5 ms of the mask's time, those "
+        "the gate judges by it (0 = uniform)",
+    )
     parser.add_argument("--contrast-weight", type=float, default=0.0, help="contrast-maximisation weight (0 = off)")
     parser.add_argument(
         "--true-mask-warp-weight",
@@ -456,6 +463,8 @@ def train(args: argparse.Namespace) -> Path:
         raise TrainingSetupError(f"--ema-decay {args.ema_decay}: must be 0 (off) or in (0, 1)")
     if args.time_budget_s < 0:
         raise TrainingSetupError(f"--time-budget-s {args.time_budget_s}: must be 0 (none) or more")
+    if args.fired_pixel_weight < 0:
+        raise TrainingSetupError(f"--fired-pixel-weight {args.fired_pixel_weight}: must be 0 (uniform) or more")
     if args.init_time_conditioning is not None and (args.init_from is None or args.resume):
         raise TrainingSetupError(
             f"--init-time-conditioning {args.init_time_conditioning}: needs --init-from and no --resume "
@@ -590,6 +599,7 @@ def train(args: argparse.Namespace) -> Path:
         flow=args.flow_weight,
         smoothness=args.smoothness_weight,
         contrast=args.contrast_weight,
+        fired_pixels=args.fired_pixel_weight,
         true_mask_warp=args.true_mask_warp_weight,
     )
     network.to(device)

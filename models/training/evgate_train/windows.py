@@ -19,6 +19,9 @@ GRID_HORIZONS_MS = tuple(range(GRID_US // 1000, SCORED_HORIZON_MS, GRID_US // 10
 # The object region of the flow loss reaches this far beyond the objects' footprints: the ring
 # is where a backward warp decides whether an edge moves or smears.
 REGION_DILATION_PX = 3
+# A mask's fired pixels are those with an event less than this before or after its time: the
+# gate judges an event by the mask of the nearest horizon, half a 10 ms grid step either way.
+FIRED_HALF_SPAN_US = GRID_US // 2
 
 
 class HorizonCountError(ValueError):
@@ -50,9 +53,11 @@ class TrainingWindow:
     voxel: np.ndarray  # [C, H, W] float32, the network input (`network_input`)
     mask: np.ndarray  # [H, W] float32, 1 = IMO
     mask_valid: bool  # the reference time has a ground-truth frame
+    fired: np.ndarray  # [H, W] bool: an event within FIRED_HALF_SPAN_US of t
     horizons_ms: np.ndarray  # [K] float32
     future_mask: np.ndarray  # [K, H, W] float32
     future_valid: np.ndarray  # [K] bool: t + h lies on the ground-truth grid
+    future_fired: np.ndarray  # [K, H, W] bool: an event within FIRED_HALF_SPAN_US of t + h
     footprint: np.ndarray  # [K, H, W] bool: an object at t or at t + h
     future_flow: np.ndarray  # [K, 2, H, W] float32, pixels
     flow_valid: np.ndarray  # [K, H, W] bool
@@ -212,6 +217,18 @@ def future_events(
     )
 
 
+def fired_pixels(sequence: Sequence, time_us: int, crop: Crop) -> np.ndarray:
+    """[crop.height, crop.width] bool: the crop's pixels with an event in [time_us −
+    FIRED_HALF_SPAN_US, time_us + FIRED_HALF_SPAN_US)."""
+    span = sequence.event_range(time_us - FIRED_HALF_SPAN_US, time_us + FIRED_HALF_SPAN_US)
+    x = sequence.events_x[span].astype(np.int64) - crop.left
+    y = sequence.events_y[span].astype(np.int64) - crop.top
+    inside = (x >= 0) & (x < crop.width) & (y >= 0) & (y < crop.height)
+    fired = np.zeros((crop.height, crop.width), bool)
+    fired[y[inside], x[inside]] = True
+    return fired
+
+
 NO_EVENTS = FutureEvents(*(np.empty(0, np.float32) for _ in range(3)), np.empty(0, bool))
 
 
@@ -237,10 +254,13 @@ def training_window(
     flow_valid = np.zeros((horizons, *shape), bool)
     footprints = np.zeros((horizons, *shape), bool)
     regions = np.zeros((horizons, *shape), bool)
+    future_fired = np.zeros((horizons, crop.height, crop.width), bool)
     events = []
     background = background_flow(sequence, reference)
     for k, horizon in enumerate(horizons_ms):
-        future = sequence.grid_index(t_end + int(round(horizon * 1000)))
+        future_time = t_end + int(round(horizon * 1000))
+        future_fired[k] = fired_pixels(sequence, future_time, crop)
+        future = sequence.grid_index(future_time)
         if future is not None:
             ids_future = sequence.masks[future]
             future_valid[k] = True
@@ -254,9 +274,11 @@ def training_window(
         voxel=cropped(full_voxel, crop),
         mask=cropped(mask, crop),
         mask_valid=now is not None,
+        fired=fired_pixels(sequence, t_end, crop),
         horizons_ms=np.asarray(horizons_ms, np.float32),
         future_mask=cropped(future_mask, crop),
         future_valid=future_valid,
+        future_fired=future_fired,
         footprint=cropped(footprints, crop),
         future_flow=cropped(flows, crop),
         flow_valid=cropped(flow_valid, crop),

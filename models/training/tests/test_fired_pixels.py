@@ -1,0 +1,83 @@
+"""The fired-pixel emphasis of the mask loss: which pixels fired, and how they weigh."""
+
+import numpy as np
+import pytest
+import torch
+
+from evgate_train.augment import Augmentation, apply
+from evgate_train.losses import bce_dice
+from evgate_train.sequence import load_sequence
+from evgate_train.train import TrainingSetupError, build_parser, train
+from evgate_train.windows import FIRED_HALF_SPAN_US, Crop, draw_horizons, reference_input, training_window
+
+
+def _fired_by_event(sequence, time_us, crop):
+    fired = np.zeros((crop.height, crop.width), bool)
+    for t, x, y in zip(sequence.events_t, sequence.events_x, sequence.events_y):
+        column, row = int(x) - crop.left, int(y) - crop.top
+        if time_us - FIRED_HALF_SPAN_US <= t < time_us + FIRED_HALF_SPAN_US and 0 <= column < crop.width and 0 <= row < crop.height:
+            fired[row, column] = True
+    return fired
+
+
+def test_fired_pixels_are_the_crop_pixels_with_an_event_near_each_masks_time(synthetic_dir):
+    sequence = load_sequence(synthetic_dir / "slide-0.npz")
+    crop = Crop(left=30, top=10, height=32, width=48)
+    reference = len(sequence.ref_ts) // 2
+    horizons = draw_horizons(np.random.default_rng(3), 3)
+    window = training_window(
+        sequence, reference, crop, horizons, reference_input(sequence, reference), 0, np.random.default_rng(0)
+    )
+    t = int(sequence.ref_ts[reference])
+    np.testing.assert_array_equal(window.fired, _fired_by_event(sequence, t, crop))
+    assert window.fired.any() and not window.fired.all()
+    for k, horizon in enumerate(horizons):
+        np.testing.assert_array_equal(
+            window.future_fired[k], _fired_by_event(sequence, t + int(round(horizon * 1000)), crop)
+        )
+    flipped = apply(window, Augmentation(True, True, False))
+    np.testing.assert_array_equal(flipped.fired, window.fired[::-1, ::-1])
+    np.testing.assert_array_equal(flipped.future_fired, window.future_fired[:, ::-1, ::-1])
+
+
+def test_emphasis_weighs_a_pixel_one_plus_its_value_in_the_bce_mean():
+    logits = torch.tensor([[[[2.0, -1.0, 0.5]]]])
+    target = torch.tensor([[[[0.0, 0.0, 1.0]]]])
+    valid = torch.ones_like(target, dtype=torch.bool)
+    per_pixel = torch.nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none").flatten()
+    emphasis = torch.tensor([[[[3.0, 0.0, 1.0]]]])
+    expected = (4 * per_pixel[0] + per_pixel[1] + 2 * per_pixel[2]) / 7
+    torch.testing.assert_close(bce_dice(logits, target, valid, 0.0, 1.0, emphasis), expected)
+    torch.testing.assert_close(
+        bce_dice(logits, target, valid, 0.0, 1.0, torch.zeros_like(emphasis)), bce_dice(logits, target, valid, 0.0)
+    )
+    # Invalid pixels stay out whatever their emphasis.
+    valid[..., 0] = False
+    torch.testing.assert_close(
+        bce_dice(logits, target, valid, 0.0, 1.0, emphasis), (per_pixel[1] + 2 * per_pixel[2]) / 3
+    )
+
+
+def _args(synthetic_dir, run_dir, *extra):
+    return build_parser().parse_args(
+        [
+            "--data", str(synthetic_dir), "--manifest", str(synthetic_dir / "manifest.json"),
+            "--run-dir", str(run_dir), "--size", "XS", "--steps", "2", "--streams", "2",
+            "--windows-per-step", "2", "--crop", "48x96", "--warmup", "1", *extra,
+        ]
+    )  # fmt: skip
+
+
+def test_training_with_fired_pixel_weight_changes_the_mask_loss(synthetic_dir, tmp_path):
+    import json
+
+    def first_mask_loss(run, *extra):
+        train(_args(synthetic_dir, tmp_path / run, *extra))
+        return json.loads((tmp_path / run / "log.jsonl").read_text().splitlines()[0])["mask"]
+
+    assert first_mask_loss("uniform") != pytest.approx(first_mask_loss("fired", "--fired-pixel-weight", "4"))
+
+
+def test_a_negative_fired_pixel_weight_is_refused(synthetic_dir, tmp_path):
+    with pytest.raises(TrainingSetupError, match="--fired-pixel-weight -1.0: must be 0"):
+        train(_args(synthetic_dir, tmp_path / "run", "--fired-pixel-weight", "-1"))
