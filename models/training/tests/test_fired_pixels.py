@@ -1,5 +1,7 @@
 """The fired-pixel emphasis of the mask loss: which pixels fired, and how they weigh."""
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -69,8 +71,6 @@ def _args(synthetic_dir, run_dir, *extra):
 
 
 def test_training_with_fired_pixel_weight_changes_the_mask_loss(synthetic_dir, tmp_path):
-    import json
-
     def first_mask_loss(run, *extra):
         train(_args(synthetic_dir, tmp_path / run, *extra))
         return json.loads((tmp_path / run / "log.jsonl").read_text().splitlines()[0])["mask"]
