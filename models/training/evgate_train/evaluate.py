@@ -83,8 +83,7 @@ def evaluate_sequence(
         current = (out.mask_logits[0, 0, : sequence.height, : sequence.width] > 0).numpy()
         now = sequence.grid_index(t_end)
         if now is not None:
-            event_pixels = np.zeros((sequence.height, sequence.width), dtype=bool)
-            event_pixels[ys, xs] = True
+            event_pixels = sequence.event_pixels(t_end - WINDOW_US, t_end + 1)
             scores["current"].add(frame_scores(current, sequence.masks[now], event_pixels))
         for k, horizon in enumerate(horizons_ms):
             future = sequence.grid_index(t_end + int(round(horizon * 1000)))

@@ -46,9 +46,7 @@ def score_sequence(sequence: Sequence, spans_ms: list[int], dilations_px: list[i
         now = sequence.grid_index(t_end)
         if now is None:
             continue
-        window = sequence.event_range(t_end - WINDOW_US, t_end + 1)
-        event_pixels = np.zeros((sequence.height, sequence.width), dtype=bool)
-        event_pixels[sequence.events_y[window], sequence.events_x[window]] = True
+        event_pixels = sequence.event_pixels(t_end - WINDOW_US, t_end + 1)
         for span_ms in spans_ms:
             span = sequence.event_range(t_end - span_ms * 1000, t_end + 1)
             labelled = sequence.events_label[span] > 0

@@ -59,6 +59,13 @@ class Sequence:
         first, last = np.searchsorted(self.events_t, [start_us, end_us], side="left")
         return slice(int(first), int(last))
 
+    def event_pixels(self, start_us: int, end_us: int) -> np.ndarray:
+        """[H, W] bool: the pixels with an event in [start_us, end_us)."""
+        span = self.event_range(start_us, end_us)
+        pixels = np.zeros((self.height, self.width), dtype=bool)
+        pixels[self.events_y[span], self.events_x[span]] = True
+        return pixels
+
     def grid_index(self, time_us: int) -> int | None:
         """Index of the ground-truth frame at exactly `time_us`, if the grid has one."""
         index = int(np.searchsorted(self.gt_ts, time_us))

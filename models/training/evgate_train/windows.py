@@ -220,13 +220,7 @@ def future_events(
 def fired_pixels(sequence: Sequence, time_us: int, crop: Crop) -> np.ndarray:
     """[crop.height, crop.width] bool: the crop's pixels with an event in [time_us −
     FIRED_HALF_SPAN_US, time_us + FIRED_HALF_SPAN_US)."""
-    span = sequence.event_range(time_us - FIRED_HALF_SPAN_US, time_us + FIRED_HALF_SPAN_US)
-    x = sequence.events_x[span].astype(np.int64) - crop.left
-    y = sequence.events_y[span].astype(np.int64) - crop.top
-    inside = (x >= 0) & (x < crop.width) & (y >= 0) & (y < crop.height)
-    fired = np.zeros((crop.height, crop.width), bool)
-    fired[y[inside], x[inside]] = True
-    return fired
+    return cropped(sequence.event_pixels(time_us - FIRED_HALF_SPAN_US, time_us + FIRED_HALF_SPAN_US), crop)
 
 
 NO_EVENTS = FutureEvents(*(np.empty(0, np.float32) for _ in range(3)), np.empty(0, bool))

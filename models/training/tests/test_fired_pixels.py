@@ -9,8 +9,9 @@ import torch
 from evgate_train.augment import Augmentation, apply
 from evgate_train.losses import bce_dice
 from evgate_train.sequence import load_sequence
-from evgate_train.train import TrainingSetupError, build_parser, train
+from evgate_train.train import TrainingSetupError, train
 from evgate_train.windows import FIRED_HALF_SPAN_US, Crop, draw_horizons, reference_input, training_window
+from test_training import _args
 
 
 def _fired_by_event(sequence, time_us, crop):
@@ -60,19 +61,9 @@ def test_emphasis_weighs_a_pixel_one_plus_its_value_in_the_bce_mean():
     )
 
 
-def _args(synthetic_dir, run_dir, *extra):
-    return build_parser().parse_args(
-        [
-            "--data", str(synthetic_dir), "--manifest", str(synthetic_dir / "manifest.json"),
-            "--run-dir", str(run_dir), "--size", "XS", "--steps", "2", "--streams", "2",
-            "--windows-per-step", "2", "--crop", "48x96", "--warmup", "1", *extra,
-        ]
-    )  # fmt: skip
-
-
 def test_training_with_fired_pixel_weight_changes_the_mask_loss(synthetic_dir, tmp_path):
     def first_mask_loss(run, *extra):
-        train(_args(synthetic_dir, tmp_path / run, *extra))
+        train(_args(synthetic_dir, tmp_path / run, 2, *extra))
         return json.loads((tmp_path / run / "log.jsonl").read_text().splitlines()[0])["mask"]
 
     assert first_mask_loss("uniform") != pytest.approx(first_mask_loss("fired", "--fired-pixel-weight", "4"))
@@ -80,4 +71,4 @@ def test_training_with_fired_pixel_weight_changes_the_mask_loss(synthetic_dir, t
 
 def test_a_negative_fired_pixel_weight_is_refused(synthetic_dir, tmp_path):
     with pytest.raises(TrainingSetupError, match="--fired-pixel-weight -1.0: must be 0"):
-        train(_args(synthetic_dir, tmp_path / "run", "--fired-pixel-weight", "-1"))
+        train(_args(synthetic_dir, tmp_path / "run", 2, "--fired-pixel-weight", "-1"))
