@@ -12,21 +12,22 @@
 # run on the final v5 val (mIoU at t + 100 ms +1.4 [0.4, 2.8] and +1.6 [1.1, 2.2]; model card).
 # It keeps an exponential moving average of the weights (decay 0.999) in ema.pt beside the
 # checkpoint, to choose on val between the averaged and the last weights. The shipped S is the
-# average of run S-v5c-8k at the end of its 8000-step schedule: it continued run S-v5c-6k from
-# its step 6000 (the rate jumped to where that schedule stands there), which continued run
-# S-v5c-jitter-pos1 from its step 4000. Run S-v5c-11k, the default, continues S-v5c-8k from its
-# step 8000 on an 11000-step schedule; its folder began as a copy, so S-v5c-8k keeps the shipped
-# weights.
+# average of run S-v5c-11k at step 10800 of its 11000-step schedule (the machine stopped there,
+# with the rate at the schedule's floor). That run continued S-v5c-8k from its step 8000, which
+# continued S-v5c-6k from 6000, which continued S-v5c-jitter-pos1 from 4000; at each jump the
+# rate rose to where the longer schedule stands. Run S-v5c-14k, the default, continues
+# S-v5c-11k from its step 10800 on a 14000-step schedule; its folder began as a copy, so
+# S-v5c-11k keeps the shipped weights.
 #
-# Environment: RUN (S-v5c-11k), INIT_FROM (../campaign/S-v5c-8k/ema.pt, relative to
-# models/training: the shipped S, for a new RUN; empty: random weights), STEPS (11000: the
+# Environment: RUN (S-v5c-14k), INIT_FROM (../campaign/S-v5c-11k/ema.pt, relative to
+# models/training: the shipped S, for a new RUN; empty: random weights), STEPS (14000: the
 # schedule's length), STOP_AT (0: run to STEPS), THREADS (1). Extra arguments go to
 # evgate_train.train.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
-run=${RUN:-S-v5c-11k}
-init_from=${INIT_FROM-../campaign/S-v5c-8k/ema.pt}
+run=${RUN:-S-v5c-14k}
+init_from=${INIT_FROM-../campaign/S-v5c-11k/ema.pt}
 evgate=$root/target/release/evgate
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
     # The split is 62.1 GB (docs/simulator.md); a full disk stops the simulator at the last
@@ -49,6 +50,6 @@ cd "$root/models/training"
 # Paths stay relative to models/training: the data cursor in the checkpoint names them.
 exec nice -n 19 .venv/bin/python -m evgate_train.train \
     --data ../../data/suite-v5-full/train --manifest ../../data/suite-v5-full/manifest.json \
-    --run-dir "../campaign/$run" --size S --steps "${STEPS:-11000}" --stop-at-step "${STOP_AT:-0}" \
+    --run-dir "../campaign/$run" --size S --steps "${STEPS:-14000}" --stop-at-step "${STOP_AT:-0}" \
     --threads "${THREADS:-1}" --val-data ../../data/suite-v5/val --val-every 500 \
     --checkpoint-every 100 --event-jitter --positive-weight 1 --ema-decay 0.999 --resume ${init_from:+--init-from "$init_from"} "$@"
