@@ -1,6 +1,7 @@
 """Parameters and compute of every model size at the sensor sizes of interest.
 
     python -m evgate_train.flops --output runs/flops.json
+    python -m evgate_train.flops --sizes S --first-spatial-gru-stage 0   # the shipped S's 3x3 gates
 
 Counts with torch's FlopCounterMode (convolutions, matrix products incl. attention; one
 multiply-add = 2 FLOPs) for one window and K = 1 horizon. Inputs are padded to multiples of 16
@@ -15,8 +16,8 @@ from pathlib import Path
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from .network import NetworkConfig, SuppressionNetwork, parameter_count
-from .sizes import BASE_CHANNELS
+from .network import FIRST_SPATIAL_GRU_STAGE, NetworkConfig, SuppressionNetwork, parameter_count
+from .sizes import BASE_CHANNELS, STAGES
 from .voxel import padded
 
 SENSORS = ((346, 260), (640, 480))
@@ -33,12 +34,33 @@ def gflops(network: SuppressionNetwork, width: int, height: int, horizons: int) 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--horizons", type=int, default=1, help="forecast horizons per window (K)")
+    parser.add_argument(
+        "--sizes",
+        type=lambda text: text.split(","),
+        default=list(BASE_CHANNELS),
+        help=f"comma-separated model sizes to count (default: all of {', '.join(BASE_CHANNELS)})",
+    )
+    parser.add_argument(
+        "--first-spatial-gru-stage",
+        type=int,
+        choices=range(STAGES + 1),
+        default=FIRST_SPATIAL_GRU_STAGE,
+        help=f"first encoder stage whose ConvGRU has 3x3 gates, 0 to {STAGES} (default {FIRST_SPATIAL_GRU_STAGE})",
+    )
     parser.add_argument("--output", type=Path, help="also write the table as JSON here")
     args = parser.parse_args(argv)
+    unknown = [size for size in args.sizes if size not in BASE_CHANNELS]
+    if unknown:
+        parser.error(f"--sizes: unknown size {unknown[0]!r}; accepted: {', '.join(BASE_CHANNELS)}")
     rows = []
-    for size in BASE_CHANNELS:
-        network = SuppressionNetwork(NetworkConfig(size=size)).eval()
-        row = {"size": size, "parameters": parameter_count(network)}
+    for size in args.sizes:
+        config = NetworkConfig(size=size, first_spatial_gru_stage=args.first_spatial_gru_stage)
+        network = SuppressionNetwork(config).eval()
+        row = {
+            "size": size,
+            "first-spatial-gru-stage": args.first_spatial_gru_stage,
+            "parameters": parameter_count(network),
+        }
         for width, height in SENSORS:
             row[f"gflops-{width}x{height}"] = round(gflops(network, width, height, args.horizons), 3)
         rows.append(row)
