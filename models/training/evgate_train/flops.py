@@ -1,7 +1,7 @@
 """Parameters and compute of every model size at the sensor sizes of interest.
 
     python -m evgate_train.flops --output runs/flops.json
-    python -m evgate_train.flops --sizes S --first-spatial-gru-stage 0   # the shipped S's 3x3 gates
+    python -m evgate_train.flops --sizes S --first-spatial-gru-stage 0   # S with 3x3 gates everywhere
 
 Counts with torch's FlopCounterMode (convolutions, matrix products incl. attention; one
 multiply-add = 2 FLOPs) for one window and K = 1 horizon. Inputs are padded to multiples of 16
