@@ -12,14 +12,13 @@
 # run on the final v5 val (mIoU at t + 100 ms +1.4 [0.4, 2.8] and +1.6 [1.1, 2.2]; model card).
 # It keeps an exponential moving average of the weights (decay 0.999) in ema.pt beside the
 # checkpoint, to choose on val between the averaged and the last weights. The shipped S is the
-# average of run S-v5c-11k at step 10800 of its 11000-step schedule (the machine stopped there,
-# with the rate at the schedule's floor). That run continued S-v5c-8k from its step 8000, which
-# continued S-v5c-6k from 6000, which continued S-v5c-jitter-pos1 from 4000; at each jump the
-# rate rose to where the longer schedule stands. Run S-v5c-14k continued S-v5c-11k from 10800
-# on a 14000-step schedule and gained nothing on small val after step 10500. Run S-v5c-gates, the
-# default, starts from S-v5c-14k's average with 3x3 ConvGRU gates in every stage (the lever that
-# gave current R@0.5 +0.6 [0.2, 0.9] in 600 steps, too little to ship alone), on a 3000-step
-# schedule peaking at 3e-4, about the rate the earlier continuations resumed at.
+# average of run S-v5c-gates, the default, at the end of its 3000-step schedule peaking at 3e-4:
+# run S-v5c-14k's average with 3x3 ConvGRU gates in every stage (the lever that gave current
+# R@0.5 +0.6 [0.2, 0.9] in 600 steps, too little to ship alone). S-v5c-14k continued S-v5c-11k
+# (the S before) from its step 10800 to 14000 and gained nothing on small val after step 10500.
+# S-v5c-11k continued S-v5c-8k from its step 8000, which continued S-v5c-6k from 6000, which
+# continued S-v5c-jitter-pos1 from 4000; at each jump the rate rose to where the longer schedule
+# stands.
 #
 # Environment: RUN (S-v5c-gates), INIT_FROM (../campaign/S-v5c-14k/ema.pt, relative to
 # models/training, for a new RUN; empty: random weights), STEPS (3000: the schedule's length),
