@@ -21,7 +21,7 @@ use crate::event_scores::EventConfusion;
 use crate::instances::match_instances;
 use crate::kept::KeptCounts;
 use crate::method::{MethodInfo, MethodKind};
-use crate::method_output::{to_mask, MethodOutput, ReferenceInputs};
+use crate::method_output::{to_mask, BaselineSource, MethodOutput, ReferenceInputs};
 use crate::oms::{event_presence, normalised_response, threshold_response, OmsParameters};
 use crate::onnx_parameters::{onnx_parameters, OnnxParametersError};
 use crate::recording::{GroundTruth, Recording};
@@ -138,7 +138,7 @@ impl Evaluation {
         config.validate()?;
         let source = models
             .first()
-            .map(|m| (m.label.as_str(), m.forecaster.rule().keep_dilation_px));
+            .map(|m| (m.label.as_str(), m.forecaster.rule()));
         let mut methods = vec![
             MethodInfo::oms(config.oms),
             MethodInfo::no_forecast(source),
@@ -241,7 +241,7 @@ impl Evaluation {
             .collect();
         let mut sweep: Vec<(HorizonAccumulator, Mean)> =
             vec![Default::default(); self.sweep_settings.len()];
-        let mut previous_current: Option<(i64, Vec<bool>)> = None;
+        let mut previous_current: Option<(i64, BaselineSource)> = None;
         if let Some(record) = &mut self.keep_record {
             record.verdicts.clear();
             record.verdicts.resize(recording.events.len(), NOT_GATED);
@@ -299,9 +299,20 @@ impl Evaluation {
             };
 
             let current_source = match (model_outputs.first(), now) {
-                (Some(Some(output)), _) => Some((output.current.clone(), output.runtime)),
+                (Some(Some(output)), _) => Some(BaselineSource {
+                    current: output.current.clone(),
+                    current_keep: output
+                        .current_keep
+                        .clone()
+                        .unwrap_or_else(|| output.current.clone()),
+                    runtime: output.runtime,
+                }),
                 (Some(None), _) => None,
-                (None, Some(now)) => Some((to_mask(now), Duration::ZERO)),
+                (None, Some(now)) => Some(BaselineSource {
+                    current: to_mask(now),
+                    current_keep: to_mask(now),
+                    runtime: Duration::ZERO,
+                }),
                 (None, None) => None,
             };
             let inputs = ReferenceInputs {
@@ -326,7 +337,7 @@ impl Evaluation {
                 .iter()
                 .map(|method| method.kind.output(&inputs))
                 .collect();
-            previous_current = current_source.map(|(current, _)| (reference_us, current));
+            previous_current = current_source.map(|source| (reference_us, source));
 
             let gated = gated_events(recording, reference_us, gate_span_us);
             let truth_at_every_gating_horizon = gating_horizons
@@ -504,7 +515,7 @@ impl Evaluation {
                 continue;
             }
             let path = model.forecaster.runtime().model_path().to_path_buf();
-            let keeps_the_forecast = model.forecaster.rule().keeps_the_forecast();
+            let rule = model.forecaster.rule();
             let forecast = model
                 .forecaster
                 .forecast(size, window, span, horizons_ms)
@@ -517,8 +528,10 @@ impl Evaluation {
             };
             model_outputs.push(Some(MethodOutput {
                 current: forecast.current.view().to_bools(),
+                current_keep: (!rule.keeps_at_the_mask_threshold())
+                    .then(|| forecast.current_keep.view().to_bools()),
                 futures: to_bools(forecast.futures),
-                keep: (!keeps_the_forecast).then(|| to_bools(forecast.keep)),
+                keep: (!rule.keeps_the_forecast()).then(|| to_bools(forecast.keep)),
                 runtime: forecast.inference,
             }));
         }

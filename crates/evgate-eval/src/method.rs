@@ -104,15 +104,15 @@ impl MethodInfo {
         }
     }
 
-    /// `current_source`: the model whose current mask is held and its forecast dilation
-    /// (`None`: the ground truth).
-    pub fn no_forecast(current_source: Option<(&str, u16)>) -> Self {
+    /// `current_source`: the model whose current mask is held and its mask rule, which the
+    /// baseline's keep regions follow (`None`: the ground truth).
+    pub fn no_forecast(current_source: Option<(&str, MaskRule)>) -> Self {
         let description = format!("{}, used for every horizon", source(current_source));
         Self::baseline("no-forecast", description, MethodKind::NoForecast, 0.0)
     }
 
-    /// `current_source`: the model whose current mask is extrapolated and its forecast dilation.
-    pub fn linear(config: &EvalConfig, current_source: Option<(&str, u16)>) -> Self {
+    /// `current_source`: the model whose current mask is extrapolated and its mask rule.
+    pub fn linear(config: &EvalConfig, current_source: Option<(&str, MaskRule)>) -> Self {
         let description = format!(
             "{}, components shifted by their centroid velocity over the last window",
             source(current_source)
@@ -175,12 +175,17 @@ impl MethodInfo {
     }
 }
 
-fn source(current_source: Option<(&str, u16)>) -> String {
+fn source(current_source: Option<(&str, MaskRule)>) -> String {
     current_source.map_or_else(
         || "the ground-truth mask at t".to_owned(),
-        |(model, dilation_px)| match dilation_px {
-            0 => format!("the current mask of {model}"),
-            px => format!("the current mask of {model} (kept regions dilated by {px} px)"),
+        |(model, rule)| match (rule.keeps_at_the_mask_threshold(), rule.keep_dilation_px) {
+            (true, 0) => format!("the current mask of {model}"),
+            (true, px) => format!("the current mask of {model} (kept regions dilated by {px} px)"),
+            (false, px) => format!(
+                "the current mask of {model} (kept regions: the mask above logit {}, moved alike \
+                 and dilated by {px} px)",
+                rule.keep_threshold_logit
+            ),
         },
     )
 }

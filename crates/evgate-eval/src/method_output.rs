@@ -13,6 +13,8 @@ use crate::oms::oms_mask;
 /// The masks one method produced for one reference time.
 pub(crate) struct MethodOutput {
     pub current: Vec<bool>,
+    /// A model's current mask at its keep threshold, where that differs from its mask threshold.
+    pub current_keep: Option<Vec<bool>>,
     pub futures: Vec<Vec<bool>>,
     /// The pixels whose events the gate keeps at each horizon, where they are not `futures`.
     pub keep: Option<Vec<Vec<bool>>>,
@@ -26,6 +28,15 @@ impl MethodOutput {
     }
 }
 
+/// The current mask the baselines move, and what it cost.
+pub(crate) struct BaselineSource {
+    pub current: Vec<bool>,
+    /// The same mask at the model's keep threshold, from which the baselines' keep regions
+    /// start as the model's do (`current` where the thresholds agree).
+    pub current_keep: Vec<bool>,
+    pub runtime: Duration,
+}
+
 /// Everything a method may look at for one reference time.
 pub(crate) struct ReferenceInputs<'a> {
     pub config: &'a EvalConfig,
@@ -36,13 +47,13 @@ pub(crate) struct ReferenceInputs<'a> {
     pub window: &'a [Event],
     /// What the baselines start from: the first model's current mask, or the true mask when
     /// no model runs, with what it cost.
-    pub current: Option<&'a (Vec<bool>, Duration)>,
+    pub current: Option<&'a BaselineSource>,
     /// The first model's keep dilation, by which the baselines built on its current mask dilate
-    /// their forecasts into keep regions too, so that their gating compares with the model's
-    /// on motion alone (0 without a model).
+    /// their forecasts of `current_keep` into keep regions too, so that their gating compares
+    /// with the model's on motion alone (0 without a model).
     pub baseline_dilation_px: u16,
-    /// The previous reference time's current mask, for linear extrapolation.
-    pub previous: Option<&'a (i64, Vec<bool>)>,
+    /// The previous reference time and its source, for linear extrapolation.
+    pub previous: Option<&'a (i64, BaselineSource)>,
     /// Each model's output (None where the model sits the recording out).
     pub models: &'a [Option<MethodOutput>],
     /// The true object ids at the reference time and at each horizon, where known.
@@ -51,13 +62,23 @@ pub(crate) struct ReferenceInputs<'a> {
 }
 
 impl ReferenceInputs<'_> {
-    /// A baseline's keep regions: its forecasts dilated as the model's are (`None`: no dilation).
-    fn keep_regions(&self, futures: &[Vec<bool>]) -> Option<Vec<Vec<bool>>> {
-        if self.baseline_dilation_px == 0 {
+    /// A baseline's keep regions: `forecast` (how it moves a mask) applied to the current mask
+    /// at the model's keep threshold, dilated as the model's keep regions are; `None` where
+    /// they are the baseline's forecasts themselves.
+    fn keep_regions(
+        &self,
+        source: &BaselineSource,
+        forecast: impl FnOnce(&[bool]) -> Vec<Vec<bool>>,
+    ) -> Option<Vec<Vec<bool>>> {
+        if self.baseline_dilation_px == 0 && source.current_keep == source.current {
             return None;
         }
+        let undilated = forecast(&source.current_keep);
+        if self.baseline_dilation_px == 0 {
+            return Some(undilated);
+        }
         let mut scratch = DilationScratch::default();
-        let regions = futures
+        let regions = undilated
             .iter()
             .map(|future| {
                 let mut region = Vec::new();
@@ -92,48 +113,58 @@ impl MethodKind {
                 Some(MethodOutput {
                     futures: vec![mask.clone(); horizons],
                     current: mask,
+                    current_keep: None,
                     keep: None,
                     runtime: started.elapsed(),
                 })
             }
-            MethodKind::NoForecast => inputs.current.map(|(current, runtime)| {
+            MethodKind::NoForecast => inputs.current.map(|source| {
                 let started = Instant::now();
-                let futures = vec![current.clone(); horizons];
+                let hold = |mask: &[bool]| vec![mask.to_vec(); horizons];
                 MethodOutput {
-                    keep: inputs.keep_regions(&futures),
-                    futures,
-                    current: current.clone(),
-                    runtime: *runtime + started.elapsed(),
+                    keep: inputs.keep_regions(source, hold),
+                    futures: hold(&source.current),
+                    current: source.current.clone(),
+                    current_keep: None,
+                    runtime: source.runtime + started.elapsed(),
                 }
             }),
-            MethodKind::Linear => inputs.current.map(|(current, runtime)| {
+            MethodKind::Linear => inputs.current.map(|source| {
                 let started = Instant::now();
                 let (previous_us, previous) = inputs
                     .previous
-                    .map_or((inputs.reference_us, current), |(t, mask)| (*t, mask));
-                let futures = extrapolate(
-                    previous,
-                    current,
-                    inputs.size,
-                    inputs.reference_us - previous_us,
-                    inputs.horizons_us,
-                    inputs.config.linear_max_match_distance_px,
-                );
+                    .map_or((inputs.reference_us, source), |(t, previous)| {
+                        (*t, previous)
+                    });
+                let extrapolate_from = |pick: fn(&BaselineSource) -> &[bool], now: &[bool]| {
+                    extrapolate(
+                        pick(previous),
+                        now,
+                        inputs.size,
+                        inputs.reference_us - previous_us,
+                        inputs.horizons_us,
+                        inputs.config.linear_max_match_distance_px,
+                    )
+                };
                 MethodOutput {
-                    keep: inputs.keep_regions(&futures),
-                    futures,
-                    current: current.clone(),
-                    runtime: *runtime + started.elapsed(),
+                    keep: inputs
+                        .keep_regions(source, |keep| extrapolate_from(|s| &s.current_keep, keep)),
+                    futures: extrapolate_from(|s| &s.current, &source.current),
+                    current: source.current.clone(),
+                    current_keep: None,
+                    runtime: source.runtime + started.elapsed(),
                 }
             }),
             MethodKind::Model(index) => inputs.models[index].as_ref().map(|output| MethodOutput {
                 current: output.current.clone(),
+                current_keep: output.current_keep.clone(),
                 futures: output.futures.clone(),
                 keep: output.keep.clone(),
                 runtime: output.runtime,
             }),
             MethodKind::Oracle => inputs.truth_now.map(|now| MethodOutput {
                 current: to_mask(now),
+                current_keep: None,
                 futures: inputs
                     .truth_at_horizon
                     .iter()
@@ -166,7 +197,11 @@ mod tests {
         let config = EvalConfig::default();
         let mut current = vec![false; size.pixels()];
         current[2 * 8 + 4] = true;
-        let current = (current, Duration::ZERO);
+        let current = BaselineSource {
+            current_keep: current.clone(),
+            current,
+            runtime: Duration::ZERO,
+        };
         let horizons_us = [50_000, 100_000];
         let inputs_with = |baseline_dilation_px| ReferenceInputs {
             config: &config,
@@ -187,7 +222,7 @@ mod tests {
             let plain = kind.output(&inputs_with(0)).unwrap();
             let dilated = kind.output(&inputs_with(1)).unwrap();
             assert_eq!(
-                dilated.current, current.0,
+                dilated.current, current.current,
                 "{kind:?}: the current mask changed"
             );
             assert_eq!(
@@ -200,5 +235,49 @@ mod tests {
                 assert_eq!(set_pixels(region, size), square, "{kind:?}");
             }
         }
+    }
+
+    #[test]
+    fn baselines_move_the_mask_at_the_models_keep_threshold_into_their_keep_regions() {
+        let size = SensorSize::new(12, 4);
+        let config = EvalConfig::default();
+        let at = |pixels: &[usize]| {
+            let mut mask = vec![false; size.pixels()];
+            for &x in pixels {
+                mask[12 + x] = true;
+            }
+            mask
+        };
+        // The object moves 1 px right per 50 ms window; at the keep threshold it is wider.
+        let source_at = |x: usize| BaselineSource {
+            current: at(&[x]),
+            current_keep: at(&[x, x + 1]),
+            runtime: Duration::ZERO,
+        };
+        let previous = (0, source_at(1));
+        let current = source_at(2);
+        let horizons_us = [50_000, 100_000];
+        let inputs = ReferenceInputs {
+            config: &config,
+            size,
+            reference_us: 50_000,
+            horizons_us: &horizons_us,
+            window: &[],
+            current: Some(&current),
+            baseline_dilation_px: 0,
+            previous: Some(&previous),
+            models: &[],
+            truth_now: None,
+            truth_at_horizon: &[None, None],
+        };
+        let held = MethodKind::NoForecast.output(&inputs).unwrap();
+        assert_eq!(held.futures, vec![at(&[2]); 2]);
+        assert_eq!(held.keep_regions(), vec![at(&[2, 3]); 2].as_slice());
+        let linear = MethodKind::Linear.output(&inputs).unwrap();
+        assert_eq!(linear.futures, vec![at(&[3]), at(&[4])]);
+        assert_eq!(
+            linear.keep_regions(),
+            vec![at(&[3, 4]), at(&[4, 5])].as_slice()
+        );
     }
 }

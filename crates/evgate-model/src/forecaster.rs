@@ -40,7 +40,12 @@ impl MaskRule {
 
     /// Whether keep regions are the forecast masks themselves.
     pub fn keeps_the_forecast(&self) -> bool {
-        self.keep_dilation_px == 0 && self.keep_threshold_logit == self.threshold_logit
+        self.keep_dilation_px == 0 && self.keeps_at_the_mask_threshold()
+    }
+
+    /// Whether keep regions are thresholded where the masks are.
+    pub fn keeps_at_the_mask_threshold(&self) -> bool {
+        self.keep_threshold_logit == self.threshold_logit
     }
 }
 
@@ -67,6 +72,10 @@ pub enum ForecastError {
 pub struct Forecast<'a> {
     /// The mask at the window's end.
     pub current: &'a BitMask,
+    /// The current mask's logits thresholded at the keep threshold, undilated: what a baseline
+    /// that moves the current mask starts its keep regions from. `current` itself where the
+    /// thresholds agree or the forecaster was made [`Forecaster::keep_regions_only`].
+    pub current_keep: &'a BitMask,
     /// One mask per requested horizon, in order; empty from a forecaster made
     /// [`Forecaster::keep_regions_only`] whose rule dilates.
     pub futures: &'a [BitMask],
@@ -95,6 +104,8 @@ pub struct Forecaster {
     masks: Vec<BitMask>,
     /// One keep region per horizon, where the rule does not keep the forecast itself.
     keep: Vec<BitMask>,
+    /// The current mask at the keep threshold, where it differs from the mask threshold.
+    current_keep: Option<BitMask>,
     /// One dilated logit plane (the dilation's own buffers are in `dilation_scratch`).
     dilated: Vec<f32>,
     dilation_scratch: DilationScratch<f32>,
@@ -112,6 +123,7 @@ impl Forecaster {
             grid: None,
             masks: Vec::new(),
             keep: Vec::new(),
+            current_keep: None,
             dilated: Vec::new(),
             dilation_scratch: DilationScratch::default(),
         }
@@ -182,6 +194,23 @@ impl Forecaster {
             mask.fill_from_binned_logits(logits, row_stride, rule.threshold_logit, downsample)
                 .map_err(mask_error)?;
         }
+        if self.forecast_masks && !rule.keeps_at_the_mask_threshold() {
+            let current_keep = match self.current_keep.take() {
+                Some(mask) if mask.size() == sensor => mask,
+                _ => BitMask::new(sensor).map_err(mask_error)?,
+            };
+            let current_keep = self.current_keep.insert(current_keep);
+            current_keep
+                .fill_from_binned_logits(
+                    output.mask_logits(),
+                    row_stride,
+                    rule.keep_threshold_logit,
+                    downsample,
+                )
+                .map_err(mask_error)?;
+        } else {
+            self.current_keep = None;
+        }
         if keeps_the_forecast {
             self.keep.clear();
         } else {
@@ -210,6 +239,7 @@ impl Forecaster {
         let (current, futures) = self.masks.split_first().expect("1 + K masks");
         Ok(Forecast {
             current,
+            current_keep: self.current_keep.as_ref().unwrap_or(current),
             futures,
             keep: if self.keep.is_empty() {
                 futures

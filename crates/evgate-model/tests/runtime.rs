@@ -397,6 +397,67 @@ fn drifting_bar() -> (SensorSize, Vec<Event>, TimeSpan) {
 }
 
 #[test]
+fn the_forecasters_current_keep_mask_is_the_current_logits_at_the_keep_threshold() {
+    let (sensor, events, window) = drifting_bar();
+    let mut raw = load();
+    let mut grid = VoxelGrid::new(sensor, raw.metadata().bins as usize).unwrap();
+    grid.accumulate(&events, window);
+    grid.normalise();
+    let output = raw
+        .forecast(&grid.as_input(raw.input_size()).unwrap(), &HORIZONS)
+        .unwrap();
+    let width = output.width();
+    let mut sorted: Vec<f32> = output.mask_logits().to_vec();
+    sorted.sort_by(f32::total_cmp);
+    let threshold_logit = sorted[sorted.len() * 99 / 100];
+    let keep_threshold_logit = sorted[sorted.len() * 97 / 100];
+    let above = |threshold: f32| -> Vec<bool> {
+        (0..usize::from(sensor.height))
+            .flat_map(|y| (0..usize::from(sensor.width)).map(move |x| (x, y)))
+            .map(|(x, y)| output.mask_logits()[y * width + x] > threshold)
+            .collect()
+    };
+    let (expected_current, expected_keep) = (above(threshold_logit), above(keep_threshold_logit));
+    assert_ne!(
+        expected_current, expected_keep,
+        "the thresholds set the same pixels"
+    );
+
+    let current_masks = |keep_threshold_logit, keep_regions_only: bool| {
+        let rule = MaskRule {
+            threshold_logit,
+            keep_threshold_logit,
+            keep_dilation_px: 0,
+        };
+        let mut forecaster = Forecaster::new(load(), rule, 1);
+        if keep_regions_only {
+            forecaster = forecaster.keep_regions_only();
+        }
+        let forecast = forecaster
+            .forecast(sensor, &events, window, &HORIZONS)
+            .unwrap();
+        (
+            forecast.current.view().to_bools(),
+            forecast.current_keep.view().to_bools(),
+        )
+    };
+    assert_eq!(
+        current_masks(keep_threshold_logit, false),
+        (expected_current.clone(), expected_keep)
+    );
+    assert_eq!(
+        current_masks(threshold_logit, false),
+        (expected_current.clone(), expected_current.clone()),
+        "where the thresholds agree the current keep mask is the current mask"
+    );
+    assert_eq!(
+        current_masks(keep_threshold_logit, true),
+        (expected_current.clone(), expected_current),
+        "keep-regions-only thresholded the current mask twice"
+    );
+}
+
+#[test]
 fn the_forecasters_keep_regions_are_its_forecasts_dilated_by_its_rule() {
     let (sensor, events, window) = drifting_bar();
     let mut raw = load();
