@@ -12,23 +12,24 @@
 # run on the final v5 val (mIoU at t + 100 ms +1.4 [0.4, 2.8] and +1.6 [1.1, 2.2]; model card).
 # It keeps an exponential moving average of the weights (decay 0.999) in ema.pt beside the
 # checkpoint, to choose on val between the averaged and the last weights. The shipped S is the
-# average of run S-v5c-gates, the default, at the end of its 3000-step schedule peaking at 3e-4:
+# average of run S-v5c-gates at the end of its 3000-step schedule peaking at 3e-4:
 # run S-v5c-14k's average with 3x3 ConvGRU gates in every stage (the lever that gave current
 # R@0.5 +0.6 [0.2, 0.9] in 600 steps, too little to ship alone). S-v5c-14k continued S-v5c-11k
 # (the S before) from its step 10800 to 14000 and gained nothing on small val after step 10500.
 # S-v5c-11k continued S-v5c-8k from its step 8000, which continued S-v5c-6k from 6000, which
 # continued S-v5c-jitter-pos1 from 4000; at each jump the rate rose to where the longer schedule
-# stands.
+# stands. Run S-v5c-gates-6k, the default, continues S-v5c-gates from its step 3000 on a
+# 6000-step schedule.
 #
-# Environment: RUN (S-v5c-gates), INIT_FROM (../campaign/S-v5c-14k/ema.pt, relative to
-# models/training, for a new RUN; empty: random weights), STEPS (3000: the schedule's length),
+# Environment: RUN (S-v5c-gates-6k), INIT_FROM (../campaign/S-v5c-14k/ema.pt, relative to
+# models/training, for a new RUN; empty: random weights), STEPS (6000: the schedule's length),
 # STOP_AT (0: run to STEPS), THREADS (1), LR (3e-4: the peak rate), FIRST_SPATIAL_GRU_STAGE (0:
 # 3x3 gates from the first stage; the runs before S-v5c-gates used LR=1e-3 and 2). Extra
 # arguments go to evgate_train.train.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
-run=${RUN:-S-v5c-gates}
+run=${RUN:-S-v5c-gates-6k}
 init_from=${INIT_FROM-../campaign/S-v5c-14k/ema.pt}
 evgate=$root/target/release/evgate
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
@@ -52,7 +53,7 @@ cd "$root/models/training"
 # Paths stay relative to models/training: the data cursor in the checkpoint names them.
 exec nice -n 19 .venv/bin/python -m evgate_train.train \
     --data ../../data/suite-v5-full/train --manifest ../../data/suite-v5-full/manifest.json \
-    --run-dir "../campaign/$run" --size S --steps "${STEPS:-3000}" --lr "${LR:-3e-4}" \
+    --run-dir "../campaign/$run" --size S --steps "${STEPS:-6000}" --lr "${LR:-3e-4}" \
     --first-spatial-gru-stage "${FIRST_SPATIAL_GRU_STAGE:-0}" --stop-at-step "${STOP_AT:-0}" \
     --threads "${THREADS:-1}" --val-data ../../data/suite-v5/val --val-every 500 \
     --checkpoint-every 100 --event-jitter --positive-weight 1 --ema-decay 0.999 --resume ${init_from:+--init-from "$init_from"} "$@"
