@@ -191,6 +191,30 @@ mod tests {
             .collect()
     }
 
+    /// What the baselines see at 50 ms, at two horizons, without a model run or ground truth.
+    fn baseline_inputs<'a>(
+        config: &'a EvalConfig,
+        size: SensorSize,
+        horizons_us: &'a [i64; 2],
+        current: &'a BaselineSource,
+        previous: Option<&'a (i64, BaselineSource)>,
+        baseline_dilation_px: u16,
+    ) -> ReferenceInputs<'a> {
+        ReferenceInputs {
+            config,
+            size,
+            reference_us: 50_000,
+            horizons_us,
+            window: &[],
+            current: Some(current),
+            baseline_dilation_px,
+            previous,
+            models: &[],
+            truth_now: None,
+            truth_at_horizon: &[None, None],
+        }
+    }
+
     #[test]
     fn baselines_on_the_model_mask_keep_their_forecasts_dilated_as_the_model_does() {
         let size = SensorSize::new(8, 6);
@@ -203,18 +227,15 @@ mod tests {
             runtime: Duration::ZERO,
         };
         let horizons_us = [50_000, 100_000];
-        let inputs_with = |baseline_dilation_px| ReferenceInputs {
-            config: &config,
-            size,
-            reference_us: 50_000,
-            horizons_us: &horizons_us,
-            window: &[],
-            current: Some(&current),
-            baseline_dilation_px,
-            previous: None,
-            models: &[],
-            truth_now: None,
-            truth_at_horizon: &[None, None],
+        let inputs_with = |baseline_dilation_px| {
+            baseline_inputs(
+                &config,
+                size,
+                &horizons_us,
+                &current,
+                None,
+                baseline_dilation_px,
+            )
         };
         let square: Vec<(usize, usize)> =
             (1..4).flat_map(|y| (3..6).map(move |x| (x, y))).collect();
@@ -257,19 +278,7 @@ mod tests {
         let previous = (0, source_at(1));
         let current = source_at(2);
         let horizons_us = [50_000, 100_000];
-        let inputs = ReferenceInputs {
-            config: &config,
-            size,
-            reference_us: 50_000,
-            horizons_us: &horizons_us,
-            window: &[],
-            current: Some(&current),
-            baseline_dilation_px: 0,
-            previous: Some(&previous),
-            models: &[],
-            truth_now: None,
-            truth_at_horizon: &[None, None],
-        };
+        let inputs = baseline_inputs(&config, size, &horizons_us, &current, Some(&previous), 0);
         let held = MethodKind::NoForecast.output(&inputs).unwrap();
         assert_eq!(held.futures, vec![at(&[2]); 2]);
         assert_eq!(held.keep_regions(), vec![at(&[2, 3]); 2].as_slice());

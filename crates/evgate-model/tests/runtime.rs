@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 
 use evgate_core::{Event, SensorSize, TimeSpan, VoxelGrid};
-use evgate_model::{Forecaster, MaskRule, ModelError, ModelRuntime, RuntimeOptions};
+use evgate_model::{
+    ForecastOutput, Forecaster, MaskRule, ModelError, ModelRuntime, RuntimeOptions,
+};
 
 const COMMITTED_MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/evgate-S.onnx");
 
@@ -396,16 +398,31 @@ fn drifting_bar() -> (SensorSize, Vec<Event>, TimeSpan) {
     (sensor, events, TimeSpan::new(0, 50_000).unwrap())
 }
 
+/// The network's own output for one window, before any forecaster thresholds it.
+fn network_output(sensor: SensorSize, events: &[Event], window: TimeSpan) -> ForecastOutput {
+    let mut raw = load();
+    let mut grid = VoxelGrid::new(sensor, raw.metadata().bins as usize).unwrap();
+    grid.accumulate(events, window);
+    grid.normalise();
+    raw.forecast(&grid.as_input(raw.input_size()).unwrap(), &HORIZONS)
+        .unwrap()
+}
+
+/// The committed network behind a forecaster with `rule`, the infer service's kind where
+/// `keep_regions_only`.
+fn forecaster_of(rule: MaskRule, keep_regions_only: bool) -> Forecaster {
+    let forecaster = Forecaster::new(load(), rule, 1);
+    if keep_regions_only {
+        forecaster.keep_regions_only()
+    } else {
+        forecaster
+    }
+}
+
 #[test]
 fn the_forecasters_current_keep_mask_is_the_current_logits_at_the_keep_threshold() {
     let (sensor, events, window) = drifting_bar();
-    let mut raw = load();
-    let mut grid = VoxelGrid::new(sensor, raw.metadata().bins as usize).unwrap();
-    grid.accumulate(&events, window);
-    grid.normalise();
-    let output = raw
-        .forecast(&grid.as_input(raw.input_size()).unwrap(), &HORIZONS)
-        .unwrap();
+    let output = network_output(sensor, &events, window);
     let width = output.width();
     let mut sorted: Vec<f32> = output.mask_logits().to_vec();
     sorted.sort_by(f32::total_cmp);
@@ -429,10 +446,7 @@ fn the_forecasters_current_keep_mask_is_the_current_logits_at_the_keep_threshold
             keep_threshold_logit,
             keep_dilation_px: 0,
         };
-        let mut forecaster = Forecaster::new(load(), rule, 1);
-        if keep_regions_only {
-            forecaster = forecaster.keep_regions_only();
-        }
+        let mut forecaster = forecaster_of(rule, keep_regions_only);
         let forecast = forecaster
             .forecast(sensor, &events, window, &HORIZONS)
             .unwrap();
@@ -460,13 +474,7 @@ fn the_forecasters_current_keep_mask_is_the_current_logits_at_the_keep_threshold
 #[test]
 fn the_forecasters_keep_regions_are_its_forecasts_dilated_by_its_rule() {
     let (sensor, events, window) = drifting_bar();
-    let mut raw = load();
-    let mut grid = VoxelGrid::new(sensor, raw.metadata().bins as usize).unwrap();
-    grid.accumulate(&events, window);
-    grid.normalise();
-    let output = raw
-        .forecast(&grid.as_input(raw.input_size()).unwrap(), &HORIZONS)
-        .unwrap();
+    let output = network_output(sensor, &events, window);
     let (width, height) = (output.width(), output.height());
     // Thresholds that set about 2 % and 1 % of the padded map, so that dilation has room.
     let mut sorted: Vec<f32> = output.future_mask_logits().flatten().copied().collect();
@@ -492,10 +500,7 @@ fn the_forecasters_keep_regions_are_its_forecasts_dilated_by_its_rule() {
         .collect();
 
     let forecast_with = |rule, keep_regions_only: bool| {
-        let mut forecaster = Forecaster::new(load(), rule, 1);
-        if keep_regions_only {
-            forecaster = forecaster.keep_regions_only();
-        }
+        let mut forecaster = forecaster_of(rule, keep_regions_only);
         let forecast = forecaster
             .forecast(sensor, &events, window, &HORIZONS)
             .unwrap();
