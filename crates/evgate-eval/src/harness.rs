@@ -278,8 +278,10 @@ impl Evaluation {
             );
 
             // The recurrent state must see every window, even one we cannot score.
-            let model_outputs =
-                self.run_models(&runs_here, size, window, span, &horizons_ms_f32)?;
+            let ModelRuns {
+                outputs: model_outputs,
+                first_current_keep,
+            } = self.run_models(&runs_here, size, window, span, &horizons_ms_f32)?;
 
             let now = recording.truth_at(reference_us);
             // A recording with masks is scored only where a mask lies at t.
@@ -301,16 +303,13 @@ impl Evaluation {
             let current_source = match (model_outputs.first(), now) {
                 (Some(Some(output)), _) => Some(BaselineSource {
                     current: output.current.clone(),
-                    current_keep: output
-                        .current_keep
-                        .clone()
-                        .unwrap_or_else(|| output.current.clone()),
+                    current_keep: first_current_keep,
                     runtime: output.runtime,
                 }),
                 (Some(None), _) => None,
                 (None, Some(now)) => Some(BaselineSource {
                     current: to_mask(now),
-                    current_keep: to_mask(now),
+                    current_keep: None,
                     runtime: Duration::ZERO,
                 }),
                 (None, None) => None,
@@ -499,7 +498,7 @@ impl Evaluation {
         Ok((runs_here, models_not_run))
     }
 
-    /// Each model's masks for one window (`None` for a model that sits the recording out).
+    /// Each model's masks for one window.
     fn run_models(
         &mut self,
         runs_here: &[bool],
@@ -507,8 +506,9 @@ impl Evaluation {
         window: &[evgate_core::Event],
         span: TimeSpan,
         horizons_ms: &[f32],
-    ) -> Result<Vec<Option<MethodOutput>>, HarnessError> {
+    ) -> Result<ModelRuns, HarnessError> {
         let mut model_outputs = Vec::with_capacity(self.models.len());
+        let mut first_current_keep = None;
         for (model, &runs) in self.models.iter_mut().zip(runs_here) {
             if !runs {
                 model_outputs.push(None);
@@ -526,16 +526,20 @@ impl Evaluation {
             let to_bools = |masks: &[evgate_core::BitMask]| -> Vec<Vec<bool>> {
                 masks.iter().map(|mask| mask.view().to_bools()).collect()
             };
+            if model_outputs.is_empty() && !rule.keeps_at_the_mask_threshold() {
+                first_current_keep = Some(forecast.current_keep.view().to_bools());
+            }
             model_outputs.push(Some(MethodOutput {
                 current: forecast.current.view().to_bools(),
-                current_keep: (!rule.keeps_at_the_mask_threshold())
-                    .then(|| forecast.current_keep.view().to_bools()),
                 futures: to_bools(forecast.futures),
                 keep: (!rule.keeps_the_forecast()).then(|| to_bools(forecast.keep)),
                 runtime: forecast.inference,
             }));
         }
-        Ok(model_outputs)
+        Ok(ModelRuns {
+            outputs: model_outputs,
+            first_current_keep,
+        })
     }
 
     /// Scores every OMS setting of the sweep at the headline horizon and the current instant.
@@ -694,6 +698,15 @@ struct GatedSpan<'a> {
     first_index: usize,
     events: &'a [evgate_core::Event],
     labels: Option<&'a [u16]>,
+}
+
+/// The models' masks for one window.
+struct ModelRuns {
+    /// One per model, `None` for a model that sits the recording out.
+    outputs: Vec<Option<MethodOutput>>,
+    /// The first model's current mask at its keep threshold, where that differs from its mask
+    /// threshold: what the baselines' keep regions start from.
+    first_current_keep: Option<Vec<bool>>,
 }
 
 fn gated_events(recording: &Recording, reference_us: i64, span_us: i64) -> GatedSpan<'_> {

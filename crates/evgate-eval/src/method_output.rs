@@ -13,8 +13,6 @@ use crate::oms::oms_mask;
 /// The masks one method produced for one reference time.
 pub(crate) struct MethodOutput {
     pub current: Vec<bool>,
-    /// A model's current mask at its keep threshold, where that differs from its mask threshold.
-    pub current_keep: Option<Vec<bool>>,
     pub futures: Vec<Vec<bool>>,
     /// The pixels whose events the gate keeps at each horizon, where they are not `futures`.
     pub keep: Option<Vec<Vec<bool>>>,
@@ -32,9 +30,16 @@ impl MethodOutput {
 pub(crate) struct BaselineSource {
     pub current: Vec<bool>,
     /// The same mask at the model's keep threshold, from which the baselines' keep regions
-    /// start as the model's do (`current` where the thresholds agree).
-    pub current_keep: Vec<bool>,
+    /// start as the model's do (`None`: the thresholds agree, it is `current`).
+    pub current_keep: Option<Vec<bool>>,
     pub runtime: Duration,
+}
+
+impl BaselineSource {
+    /// The mask the baselines' keep regions start from.
+    fn keep_mask(&self) -> &[bool] {
+        self.current_keep.as_deref().unwrap_or(&self.current)
+    }
 }
 
 /// Everything a method may look at for one reference time.
@@ -70,10 +75,10 @@ impl ReferenceInputs<'_> {
         source: &BaselineSource,
         forecast: impl FnOnce(&[bool]) -> Vec<Vec<bool>>,
     ) -> Option<Vec<Vec<bool>>> {
-        if self.baseline_dilation_px == 0 && source.current_keep == source.current {
+        if self.baseline_dilation_px == 0 && source.current_keep.is_none() {
             return None;
         }
-        let undilated = forecast(&source.current_keep);
+        let undilated = forecast(source.keep_mask());
         if self.baseline_dilation_px == 0 {
             return Some(undilated);
         }
@@ -113,7 +118,6 @@ impl MethodKind {
                 Some(MethodOutput {
                     futures: vec![mask.clone(); horizons],
                     current: mask,
-                    current_keep: None,
                     keep: None,
                     runtime: started.elapsed(),
                 })
@@ -125,7 +129,6 @@ impl MethodKind {
                     keep: inputs.keep_regions(source, hold),
                     futures: hold(&source.current),
                     current: source.current.clone(),
-                    current_keep: None,
                     runtime: source.runtime + started.elapsed(),
                 }
             }),
@@ -147,24 +150,22 @@ impl MethodKind {
                     )
                 };
                 MethodOutput {
-                    keep: inputs
-                        .keep_regions(source, |keep| extrapolate_from(|s| &s.current_keep, keep)),
+                    keep: inputs.keep_regions(source, |keep| {
+                        extrapolate_from(BaselineSource::keep_mask, keep)
+                    }),
                     futures: extrapolate_from(|s| &s.current, &source.current),
                     current: source.current.clone(),
-                    current_keep: None,
                     runtime: source.runtime + started.elapsed(),
                 }
             }),
             MethodKind::Model(index) => inputs.models[index].as_ref().map(|output| MethodOutput {
                 current: output.current.clone(),
-                current_keep: output.current_keep.clone(),
                 futures: output.futures.clone(),
                 keep: output.keep.clone(),
                 runtime: output.runtime,
             }),
             MethodKind::Oracle => inputs.truth_now.map(|now| MethodOutput {
                 current: to_mask(now),
-                current_keep: None,
                 futures: inputs
                     .truth_at_horizon
                     .iter()
@@ -222,8 +223,8 @@ mod tests {
         let mut current = vec![false; size.pixels()];
         current[2 * 8 + 4] = true;
         let current = BaselineSource {
-            current_keep: current.clone(),
             current,
+            current_keep: None,
             runtime: Duration::ZERO,
         };
         let horizons_us = [50_000, 100_000];
@@ -272,7 +273,7 @@ mod tests {
         // The object moves 1 px right per 50 ms window; at the keep threshold it is wider.
         let source_at = |x: usize| BaselineSource {
             current: at(&[x]),
-            current_keep: at(&[x, x + 1]),
+            current_keep: Some(at(&[x, x + 1])),
             runtime: Duration::ZERO,
         };
         let previous = (0, source_at(1));
