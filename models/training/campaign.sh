@@ -18,8 +18,8 @@
 # (the S before) from its step 10800 to 14000 and gained nothing on small val after step 10500.
 # S-v5c-11k continued S-v5c-8k from its step 8000, which continued S-v5c-6k from 6000, which
 # continued S-v5c-jitter-pos1 from 4000; at each jump the rate rose to where the longer schedule
-# stands. Run S-v5c-gates-6k, the default, continues S-v5c-gates from its step 3000 on a
-# 6000-step schedule.
+# stands. Run S-v5c-gates-6k, the default, continued S-v5c-gates from its step 3000 to the end of
+# a 6000-step schedule; its average tied S on full val and did not ship (model card).
 #
 # Environment: RUN (S-v5c-gates-6k), INIT_FROM (../campaign/S-v5c-14k/ema.pt, relative to
 # models/training, for a new RUN; empty: random weights), STEPS (6000: the schedule's length),
