@@ -32,6 +32,14 @@ root=$(cd "$(dirname "$0")/../.." && pwd)
 run=${RUN:-S-v5c-gates-6k}
 init_from=${INIT_FROM-../campaign/S-v5c-14k/ema.pt}
 evgate=$root/target/release/evgate
+# A finished run would otherwise spend the 35 minutes of data generation before stopping at once.
+log=$root/models/campaign/$run/log.jsonl
+done_steps=$(tail -n 1 "$log" 2>/dev/null | grep -o '"step": [0-9]*' | grep -o '[0-9]*$' || true)
+if (( ${done_steps:-0} >= ${STEPS:-6000} )); then
+    echo "campaign: run $run has done ${done_steps} of its ${STEPS:-6000} steps (models/campaign/$run/log.jsonl);" \
+        "name a new RUN (with INIT_FROM) or a longer STEPS" >&2
+    exit 1
+fi
 if [[ ! -f $root/data/suite-v5-full/manifest.json ]]; then
     # The split is 62.1 GB (docs/simulator.md); a full disk stops the simulator at the last
     # sequences, after 44 minutes, so refuse at once when it cannot fit.
