@@ -55,3 +55,4 @@ def test_an_unfinished_run_resumes_with_the_recipe(tmp_path):
     assert arguments[arguments.index("--run-dir") + 1] == "../campaign/longer"
     assert "--resume" in arguments
     assert "--event-jitter" in arguments
+    assert arguments[arguments.index("--streams") + 1] == "8"
