@@ -34,12 +34,13 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 run=${RUN:-S-v5c-s8}
 init_from=${INIT_FROM-../campaign/S-v5c-gates-6k/ema.pt}
+steps=${STEPS:-3000}
 evgate=$root/target/release/evgate
 # A finished run would otherwise spend the 35 minutes of data generation before stopping at once.
 log=$root/models/campaign/$run/log.jsonl
 done_steps=$(tail -n 1 "$log" 2>/dev/null | grep -o '"step": [0-9]*' | grep -o '[0-9]*$' || true)
-if (( ${done_steps:-0} >= ${STEPS:-3000} )); then
-    echo "campaign: run $run has done ${done_steps} of its ${STEPS:-3000} steps (models/campaign/$run/log.jsonl);" \
+if (( ${done_steps:-0} >= steps )); then
+    echo "campaign: run $run has done ${done_steps} of its $steps steps (models/campaign/$run/log.jsonl);" \
         "name a new RUN (with INIT_FROM) or a longer STEPS" >&2
     exit 1
 fi
@@ -64,7 +65,7 @@ cd "$root/models/training"
 # Paths stay relative to models/training: the data cursor in the checkpoint names them.
 exec nice -n 19 .venv/bin/python -m evgate_train.train \
     --data ../../data/suite-v5-full/train --manifest ../../data/suite-v5-full/manifest.json \
-    --run-dir "../campaign/$run" --size S --steps "${STEPS:-3000}" --lr "${LR:-3e-4}" \
+    --run-dir "../campaign/$run" --size S --steps "$steps" --lr "${LR:-3e-4}" \
     --streams "${STREAMS:-8}" \
     --first-spatial-gru-stage "${FIRST_SPATIAL_GRU_STAGE:-0}" --stop-at-step "${STOP_AT:-0}" \
     --threads "${THREADS:-1}" --val-data ../../data/suite-v5/val --val-every 500 \
