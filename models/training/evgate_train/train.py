@@ -286,6 +286,12 @@ def build_parser() -> argparse.ArgumentParser:
         "A resumed run keeps its count",
     )
     parser.add_argument("--bf16", action="store_true", help="bfloat16 autocast of the forward pass (CPU AVX-512 BF16)")
+    parser.add_argument(
+        "--channels-last",
+        action="store_true",
+        help="keep the weights and the input in the channels-last memory layout: the same arithmetic, "
+        "slower per step on a 2-core CPU (model card)",
+    )
     parser.add_argument("--checkpoint-every", type=int, default=50, help="steps between checkpoints")
     parser.add_argument(
         "--val-data", type=Path, help="directory of validation .npz sequences, scored every --val-every steps"
@@ -379,6 +385,7 @@ def train_step(
     states: list[torch.Tensor],
     weights: LossWeights,
     bf16: bool = False,
+    channels_last: bool = False,
 ) -> tuple[list[torch.Tensor], dict[str, torch.Tensor]]:
     """One optimiser step over a stream step's windows, the states carried through them; returns
     the states at its end and the window-averaged losses (with the gradient norm)."""
@@ -387,8 +394,9 @@ def train_step(
     sums: dict[str, torch.Tensor] = {}
     for batch in drawn.windows:
         batch = batch.to(device)
+        voxel = batch.voxel.contiguous(memory_format=torch.channels_last) if channels_last else batch.voxel
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
-            out = network(batch.voxel, batch.horizons_ms, states)
+            out = network(voxel, batch.horizons_ms, states)
         states = out.states
         for key, value in window_objective(out, batch, weights).items():
             sums[key] = sums.get(key, 0.0) + value.float() / len(drawn.windows)
@@ -603,6 +611,8 @@ def train(args: argparse.Namespace) -> Path:
         true_mask_warp=args.true_mask_warp_weight,
     )
     network.to(device)
+    if args.channels_last:
+        network.to(memory_format=torch.channels_last)
     optimiser = torch.optim.AdamW(network.parameters(), lr=args.lr, weight_decay=args.weight_decay)
     if optimiser_state is not None:
         optimiser.load_state_dict(optimiser_state)
@@ -664,7 +674,8 @@ def train(args: argparse.Namespace) -> Path:
             if step + 1 < last_step:
                 upcoming = drawing.submit(drawn_with_cursor)
             states, sums = train_step(
-                network, optimiser, drawn, states, forecast_ramped(weights, step, args.forecast_ramp_steps), args.bf16
+                network, optimiser, drawn, states, forecast_ramped(weights, step, args.forecast_ramp_steps),
+                args.bf16, args.channels_last,
             )
             if average is not None:
                 average.update_parameters(network)

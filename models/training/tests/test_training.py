@@ -179,6 +179,21 @@ def test_stop_at_step_keeps_the_longer_schedule(synthetic_dir, tmp_path):
     assert load_checkpoint(run / "checkpoint.pt").step == 2
 
 
+def test_channels_last_trains_the_same_arithmetic_in_another_layout(synthetic_dir, tmp_path):
+    contiguous, channels_last = tmp_path / "contiguous", tmp_path / "channels-last"
+    train(_args(synthetic_dir, contiguous, 3))
+    train(_args(synthetic_dir, channels_last, 3, "--channels-last"))
+    logged = [[json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()] for run in (contiguous, channels_last)]
+    for plain, reordered in zip(*logged):
+        assert reordered["total"] == pytest.approx(plain["total"], rel=1e-3)
+    # The weights really were in the other layout (kept by the saved tensors' strides) ...
+    weights = torch.load(channels_last / "checkpoint.pt", map_location="cpu", weights_only=False)["weights"]
+    reordered = [w for w in weights.values() if w.dim() == 4 and w.shape[1] > 1 and w.shape[-1] > 1]
+    assert reordered and all(w.is_contiguous(memory_format=torch.channels_last) and not w.is_contiguous() for w in reordered)
+    # ... and load as ordinary weights for evaluation and export.
+    assert all(p.is_contiguous() for p in load_checkpoint(channels_last / "checkpoint.pt").network.parameters())
+
+
 def test_init_from_starts_a_new_run_from_another_runs_weights(synthetic_dir, tmp_path):
     import torch
 
