@@ -184,8 +184,8 @@ def test_channels_last_trains_the_same_arithmetic_in_another_layout(synthetic_di
     train(_args(synthetic_dir, contiguous, 3))
     train(_args(synthetic_dir, channels_last, 3, "--channels-last"))
     logged = [[json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()] for run in (contiguous, channels_last)]
-    for plain, reordered in zip(*logged):
-        assert reordered["total"] == pytest.approx(plain["total"], rel=1e-3)
+    for plain_record, channels_last_record in zip(*logged):
+        assert channels_last_record["total"] == pytest.approx(plain_record["total"], rel=1e-3)
     # The weights really were in the other layout (kept by the saved tensors' strides) ...
     weights = torch.load(channels_last / "checkpoint.pt", map_location="cpu", weights_only=False)["weights"]
     reordered = [w for w in weights.values() if w.dim() == 4 and w.shape[1] > 1 and w.shape[-1] > 1]
