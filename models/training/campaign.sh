@@ -19,21 +19,25 @@
 # S-v5c-11k continued S-v5c-8k from its step 8000, which continued S-v5c-6k from 6000, which
 # continued S-v5c-jitter-pos1 from 4000; at each jump the rate rose to where the longer schedule
 # stands. Run S-v5c-gates-6k continued S-v5c-gates from its step 3000 to the end of a 6000-step
-# schedule; its average tied S on full val and did not ship (model card). Run S-v5c-s8, the
-# default, starts from that average with 8 streams per step, not 4: in a paired run at equal
-# windows 8 streams gave val mIoU +0.3 [0.1, 0.6] (model card, the lever table).
+# schedule, and run S-v5c-s8 took its average 3000 steps further with 8 streams per step, not 4;
+# neither average gained mIoU over S on full val, so neither shipped (model card). Steps at this
+# width have stopped paying: the default run, S-v5c-wide24, widens S-v5c-s8's average's encoder
+# from base 16 to 24 (function-preserving at step 0), the capacity lever whose 600-step paired run
+# gave current R@0.5 +0.6 [0.1, 1.2] at equal mIoU, as the 3x3 gates did before their 3000 steps
+# gained (model card, the lever table). A step of 8 streams takes 1.3 times as long.
 #
-# Environment: RUN (S-v5c-s8), INIT_FROM (../campaign/S-v5c-gates-6k/ema.pt, relative to
+# Environment: RUN (S-v5c-wide24), INIT_FROM (../campaign/S-v5c-s8/ema.pt, relative to
 # models/training, for a new RUN; empty: random weights), STEPS (3000: the schedule's length),
 # STOP_AT (0: run to STEPS), THREADS (1), LR (3e-4: the peak rate), STREAMS (8: sequences per
 # step; 4 for every run before S-v5c-s8), FIRST_SPATIAL_GRU_STAGE (0: 3x3 gates from the first
-# stage; the runs before S-v5c-gates used LR=1e-3 and 2). Extra arguments go to
-# evgate_train.train.
+# stage; the runs before S-v5c-gates used LR=1e-3 and 2), ENCODER_BASE_CHANNELS (24; empty for
+# base 16, every run before S-v5c-wide24). Extra arguments go to evgate_train.train.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/../.." && pwd)
-run=${RUN:-S-v5c-s8}
-init_from=${INIT_FROM-../campaign/S-v5c-gates-6k/ema.pt}
+run=${RUN:-S-v5c-wide24}
+init_from=${INIT_FROM-../campaign/S-v5c-s8/ema.pt}
+encoder_base_channels=${ENCODER_BASE_CHANNELS-24}
 steps=${STEPS:-3000}
 evgate=$root/target/release/evgate
 # A finished run would otherwise spend the 35 minutes of data generation before stopping at once.
@@ -67,6 +71,7 @@ exec nice -n 19 .venv/bin/python -m evgate_train.train \
     --data ../../data/suite-v5-full/train --manifest ../../data/suite-v5-full/manifest.json \
     --run-dir "../campaign/$run" --size S --steps "$steps" --lr "${LR:-3e-4}" \
     --streams "${STREAMS:-8}" \
-    --first-spatial-gru-stage "${FIRST_SPATIAL_GRU_STAGE:-0}" --stop-at-step "${STOP_AT:-0}" \
+    --first-spatial-gru-stage "${FIRST_SPATIAL_GRU_STAGE:-0}" \
+    ${encoder_base_channels:+--encoder-base-channels "$encoder_base_channels"} --stop-at-step "${STOP_AT:-0}" \
     --threads "${THREADS:-1}" --val-data ../../data/suite-v5/val --val-every 500 \
     --checkpoint-every 100 --event-jitter --positive-weight 1 --ema-decay 0.999 --resume ${init_from:+--init-from "$init_from"} "$@"

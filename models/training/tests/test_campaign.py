@@ -56,3 +56,11 @@ def test_an_unfinished_run_resumes_with_the_recipe(tmp_path):
     assert "--resume" in arguments
     assert "--event-jitter" in arguments
     assert arguments[arguments.index("--streams") + 1] == "8"
+    assert arguments[arguments.index("--encoder-base-channels") + 1] == "24"
+
+
+def test_a_run_at_the_base_width_resumes_without_widening(tmp_path):
+    campaign_tree(tmp_path, "base-width", last_step=100)
+    result = run_campaign(tmp_path, RUN="base-width", ENCODER_BASE_CHANNELS="")
+    assert result.returncode == 0, result.stderr
+    assert "--encoder-base-channels" not in result.stdout.split()
