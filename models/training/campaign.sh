@@ -24,7 +24,7 @@
 # width have stopped paying: the default run, S-v5c-wide24, widens S-v5c-s8's average's encoder
 # from base 16 to 24 (function-preserving at step 0), the capacity lever whose 600-step paired run
 # gave current R@0.5 +0.6 [0.1, 1.2] at equal mIoU, as the 3x3 gates did before their 3000 steps
-# gained (model card, the lever table). A step of 8 streams takes 1.3 times as long.
+# gained (model card, the lever table). Its steps of 8 streams take 4.4 s on 2 cores, not 3.6 s.
 #
 # Environment: RUN (S-v5c-wide24), INIT_FROM (../campaign/S-v5c-s8/ema.pt, relative to
 # models/training, for a new RUN; empty: random weights), STEPS (3000: the schedule's length),
