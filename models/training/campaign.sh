@@ -20,11 +20,11 @@
 # continued S-v5c-jitter-pos1 from 4000; at each jump the rate rose to where the longer schedule
 # stands. Run S-v5c-gates-6k continued S-v5c-gates from its step 3000 to the end of a 6000-step
 # schedule, and run S-v5c-s8 took its average 3000 steps further with 8 streams per step, not 4;
-# neither average gained mIoU over S on full val, so neither shipped (model card). Steps at this
-# width have stopped paying: the default run, S-v5c-wide24, widens S-v5c-s8's average's encoder
-# from base 16 to 24 (function-preserving at step 0), the capacity lever whose 600-step paired run
-# gave current R@0.5 +0.6 [0.1, 1.2] at equal mIoU, as the 3x3 gates did before their 3000 steps
-# gained (model card, the lever table). Its steps of 8 streams take 4.4 s on 2 cores, not 3.6 s.
+# neither average gained mIoU over S on full val, so neither shipped (model card). The default
+# run, S-v5c-wide24, widened S-v5c-s8's average's encoder from base 16 to 24 (function-preserving
+# at step 0) for 3000 steps of 8 streams (3.9-4.4 s each on 2 cores, not 3.6 s); its average
+# gained pIoU and event F1 over S on full val but not mIoU, so it did not ship either (model
+# card, the lever table). A further run needs a new RUN and INIT_FROM.
 #
 # Environment: RUN (S-v5c-wide24), INIT_FROM (../campaign/S-v5c-s8/ema.pt, relative to
 # models/training, for a new RUN; empty: random weights), STEPS (3000: the schedule's length),
