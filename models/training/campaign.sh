@@ -22,7 +22,7 @@
 # schedule, and run S-v5c-s8 took its average 3000 steps further with 8 streams per step, not 4;
 # neither average gained mIoU over S on full val, so neither shipped (model card). The default
 # run, S-v5c-wide24, widened S-v5c-s8's average's encoder from base 16 to 24 (function-preserving
-# at step 0) for 3000 steps of 8 streams (3.9-4.4 s each on 2 cores, not 3.6 s); its average
+# at step 0) for 3000 steps of 8 streams (4.3 s each on 2 cores with val, not 3.6 s); its average
 # gained pIoU and event F1 over S on full val but not mIoU, so it did not ship either (model
 # card, the lever table). A further run needs a new RUN and INIT_FROM.
 #
