@@ -5,9 +5,10 @@ over the pixels that hold at least one event, SR@0.5 = frames with IMO IoU >= 0.
 with no IMO in prediction and truth counts as a success), R@0.5 = ground-truth instances
 matched (Hungarian on IoU against 8-connected predicted components) with IoU > 0.5.
 
-Also (this module only): the predicted IMO area, false negatives and false positives as shares
-of the true IMO area, pooled over a sequence's frames; they tell a forecast that is too large
-(e.g. smeared over the strip a moving object uncovers) from one that is too small.
+Also (this module only): R@0.5 of small, medium and large instances (`INSTANCE_AREA_BANDS`);
+the predicted IMO area, false negatives and false positives as shares of the true IMO area,
+pooled over a sequence's frames; they tell a forecast that is too large (e.g. smeared over the
+strip a moving object uncovers) from one that is too small.
 """
 
 from dataclasses import dataclass, field
@@ -17,6 +18,9 @@ from scipy import ndimage
 from scipy.optimize import linear_sum_assignment
 
 EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
+# R@0.5 is also reported per band of instance area (px): the suite's objects are small, and how
+# many are found depends most on their size. (name, smallest area, first area above the band)
+INSTANCE_AREA_BANDS = (("small", 0, 200), ("medium", 200, 800), ("large", 800, None))
 
 
 def _iou(predicted: np.ndarray, truth: np.ndarray) -> float:
@@ -37,6 +41,8 @@ class FrameScores:
     truth_px: int
     false_negative_px: int
     false_positive_px: int
+    # (area in px, found) of each ground-truth instance
+    instances: list[tuple[int, bool]] = field(default_factory=list)
 
 
 def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.ndarray | None) -> FrameScores:
@@ -46,38 +52,45 @@ def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.
     background = _iou(~predicted, ~truth)
     defined = [v for v in (imo, background) if not np.isnan(v)]
     piou = _iou(predicted & event_pixels, truth & event_pixels) if event_pixels is not None else float("nan")
-    found, total = match_instances(predicted, truth_ids)
+    instances = matched_instances(predicted, truth_ids)
     return FrameScores(
         imo_iou=imo,
         background_iou=background,
         miou=float(np.mean(defined)) if defined else float("nan"),
         piou=piou,
         success=bool(np.isnan(imo) or imo >= 0.5),
-        instances_found=found,
-        instances_total=total,
+        instances_found=sum(found for _, found in instances),
+        instances_total=len(instances),
         predicted_px=int(np.count_nonzero(predicted)),
         truth_px=int(np.count_nonzero(truth)),
         false_negative_px=int(np.count_nonzero(truth & ~predicted)),
         false_positive_px=int(np.count_nonzero(predicted & ~truth)),
+        instances=instances,
     )
 
 
-def match_instances(predicted: np.ndarray, truth_ids: np.ndarray, threshold: float = 0.5) -> tuple[int, int]:
-    """(ground-truth instances matched with IoU > threshold, ground-truth instances)."""
+def matched_instances(
+    predicted: np.ndarray, truth_ids: np.ndarray, threshold: float = 0.5
+) -> list[tuple[int, bool]]:
+    """(area in px, matched with IoU > threshold) of each ground-truth instance, by id."""
     ids = [int(i) for i in np.unique(truth_ids) if i != 0]
     if not ids:
-        return 0, 0
+        return []
+    areas = [int(np.count_nonzero(truth_ids == instance)) for instance in ids]
     labels, count = ndimage.label(predicted, structure=EIGHT_CONNECTED)
     if count == 0:
-        return 0, len(ids)
+        return [(area, False) for area in areas]
     ious = np.zeros((len(ids), count))
     component_areas = np.bincount(labels.ravel(), minlength=count + 1)[1:]
     for row, instance in enumerate(ids):
         inside = truth_ids == instance
         shared = np.bincount(labels[inside], minlength=count + 1)[1:]
-        ious[row] = shared / (np.count_nonzero(inside) + component_areas - shared)
+        ious[row] = shared / (areas[row] + component_areas - shared)
+    found = [False] * len(ids)
     rows, cols = linear_sum_assignment(ious, maximize=True)
-    return int(np.count_nonzero(ious[rows, cols] > threshold)), len(ids)
+    for row, col in zip(rows, cols):
+        found[row] = bool(ious[row, col] > threshold)
+    return list(zip(areas, found))
 
 
 @dataclass
@@ -101,6 +114,15 @@ class SequenceScores:
         def share_of_truth(name: str) -> float:
             return sum(getattr(f, name) for f in self.frames) / truth_px if truth_px else float("nan")
 
+        def recall_of_band(smallest: int, above: int | None) -> float:
+            flags = [
+                found
+                for f in self.frames
+                for area, found in f.instances
+                if area >= smallest and (above is None or area < above)
+            ]
+            return float(np.mean(flags)) if flags else float("nan")
+
         return {
             "frames": len(self.frames),
             "miou": mean("miou"),
@@ -108,6 +130,7 @@ class SequenceScores:
             "piou": mean("piou"),
             "sr50": float(np.mean([f.success for f in self.frames])) if self.frames else float("nan"),
             "r50": found / total if total else float("nan"),
+            **{f"r50_{name}": recall_of_band(smallest, above) for name, smallest, above in INSTANCE_AREA_BANDS},
             "area_ratio": share_of_truth("predicted_px"),
             "false_negative_share": share_of_truth("false_negative_px"),
             "false_positive_share": share_of_truth("false_positive_px"),

@@ -19,7 +19,7 @@ import numpy as np
 
 RESAMPLES = 4000
 SEED = 20261203
-METRICS = ("miou", "imo_iou", "piou", "sr50", "r50")
+METRICS = ("miou", "imo_iou", "piou", "sr50", "r50", "r50_small", "r50_medium", "r50_large")
 
 
 class ComparisonSetupError(ValueError):
@@ -50,7 +50,8 @@ def compare(report: dict, baseline: str, candidate: str, keys: list[str]) -> lis
             pairs = [
                 (sides[0][s][key][metric], sides[1][s][key][metric])
                 for s in shared
-                if key in sides[0][s] and key in sides[1][s]
+                # Reports from before the instance-area bands lack those metrics.
+                if metric in sides[0][s].get(key, {}) and metric in sides[1][s].get(key, {})
                 and not math.isnan(sides[0][s][key][metric]) and not math.isnan(sides[1][s][key][metric])
             ]
             if len(pairs) < 2:

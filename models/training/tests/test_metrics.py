@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from evgate_train.linear_extrapolation import extrapolate
-from evgate_train.metrics import frame_scores, match_instances
+from evgate_train.metrics import SequenceScores, frame_scores, matched_instances
 
 
 def test_iou_miou_and_piou():
@@ -27,8 +27,24 @@ def test_recall_matches_instances_one_to_one():
     predicted = np.zeros((12, 12), bool)
     predicted[1:4, 1:4] = True  # exact match of instance 1
     predicted[7:8, 7:8] = True  # far too small for instance 2
-    assert match_instances(predicted, truth) == (1, 2)
-    assert match_instances(np.zeros((12, 12), bool), truth) == (0, 2)
+    assert matched_instances(predicted, truth) == [(9, True), (16, False)]
+    assert matched_instances(np.zeros((12, 12), bool), truth) == [(9, False), (16, False)]
+
+
+def test_recall_is_split_by_instance_area():
+    truth = np.zeros((40, 40), np.uint8)
+    truth[0:5, 0:5] = 1  # 25 px: small
+    truth[10:30, 10:30] = 2  # 400 px: medium
+    truth[0:4, 30:34] = 3  # 16 px: small
+    predicted = truth == 1
+    scores = SequenceScores()
+    scores.add(frame_scores(predicted, truth, None))
+    scores.add(frame_scores(truth > 0, truth, None))
+    summary = scores.summary()
+    assert summary["r50"] == pytest.approx(4 / 6)
+    assert summary["r50_small"] == pytest.approx(3 / 4)
+    assert summary["r50_medium"] == pytest.approx(1 / 2)
+    assert np.isnan(summary["r50_large"])
 
 
 def test_empty_frame_is_a_success_with_undefined_imo_iou():
