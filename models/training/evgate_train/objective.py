@@ -8,7 +8,7 @@ import torch
 
 from .batches import WindowBatch
 from .contrast_maximisation import batched_average_timestamp_loss
-from .losses import bce_dice, charbonnier_smoothness, flow_l1_by_region
+from .losses import bce_dice, charbonnier_smoothness, flow_l1_by_region, small_object_emphasis
 from .network import NetworkOutput
 from .warp import backward_warp
 
@@ -33,6 +33,9 @@ class LossWeights:
     # scores the mask only where events arrive, uniform weights spend the loss on silent
     # interiors and background alike.
     fired_pixels: float = 0.0
+    # IMO pixels of a true component smaller than this many pixels weigh this area / its area
+    # times as much in the mask BCE (`small_object_emphasis`); 0: off.
+    small_object_area: float = 0.0
     # The true mask at t warped by the predicted flow against the true mask at t + h: a flow
     # signal that does not depend on how good the predicted current mask is.
     true_mask_warp: float = 0.0
@@ -47,7 +50,7 @@ def window_objective(
     """`with_contrast=False` skips the contrast-maximisation term (`contrast_term`)."""
     valid = batch.mask_valid.view(-1, 1, 1, 1).expand_as(batch.mask)
     current = bce_dice(
-        out.mask_logits, batch.mask, valid, weights.dice, weights.positive, fired_emphasis(batch.fired, weights)
+        out.mask_logits, batch.mask, valid, weights.dice, weights.positive, mask_emphasis(batch.mask, batch.fired, weights)
     )
     future_valid = batch.future_valid[..., None, None].expand_as(batch.future_mask)
     future = bce_dice(
@@ -56,7 +59,7 @@ def window_objective(
         future_valid,
         weights.dice,
         weights.positive,
-        fired_emphasis(batch.future_fired, weights),
+        mask_emphasis(batch.future_mask, batch.future_fired, weights),
     )
     flow = out.future_flow.flatten(0, 1)
     flow_valid = (batch.flow_valid & future_valid).flatten(0, 1)
@@ -97,8 +100,15 @@ def window_objective(
     }
 
 
-def fired_emphasis(fired: torch.Tensor, weights: LossWeights) -> torch.Tensor | None:
-    return fired * weights.fired_pixels if weights.fired_pixels > 0 else None
+def mask_emphasis(target: torch.Tensor, fired: torch.Tensor, weights: LossWeights) -> torch.Tensor | None:
+    """The extra BCE weight of each pixel of a mask `target`: its fired-pixel and small-object
+    emphases; None when both are off."""
+    parts = []
+    if weights.fired_pixels > 0:
+        parts.append(fired * weights.fired_pixels)
+    if weights.small_object_area > 0:
+        parts.append(small_object_emphasis(target, weights.small_object_area))
+    return sum(parts[1:], parts[0]) if parts else None
 
 
 def true_mask_warp_term(flow: torch.Tensor, batch: WindowBatch, weights: LossWeights) -> torch.Tensor:

@@ -231,6 +231,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="extra mask BCE weight of the pixels with an event within 5 ms of the mask's time, those "
         "the gate judges by it (0 = uniform)",
     )
+    parser.add_argument(
+        "--small-object-area",
+        type=float,
+        default=0.0,
+        help="IMO pixels of a true 8-connected component smaller than this many pixels weigh this area / "
+        "its area times as much in the mask BCE, at most 8 times (0 = off): the frame-mean mIoU and "
+        "R@0.5 count small objects as much as large ones",
+    )
     parser.add_argument("--contrast-weight", type=float, default=0.0, help="contrast-maximisation weight (0 = off)")
     parser.add_argument(
         "--true-mask-warp-weight",
@@ -473,6 +481,8 @@ def train(args: argparse.Namespace) -> Path:
         raise TrainingSetupError(f"--time-budget-s {args.time_budget_s}: must be 0 (none) or more")
     if args.fired_pixel_weight < 0:
         raise TrainingSetupError(f"--fired-pixel-weight {args.fired_pixel_weight}: must be 0 (uniform) or more")
+    if args.small_object_area < 0:
+        raise TrainingSetupError(f"--small-object-area {args.small_object_area}: must be 0 (off) or more pixels")
     if args.init_time_conditioning is not None and (args.init_from is None or args.resume):
         raise TrainingSetupError(
             f"--init-time-conditioning {args.init_time_conditioning}: needs --init-from and no --resume "
@@ -608,6 +618,7 @@ def train(args: argparse.Namespace) -> Path:
         smoothness=args.smoothness_weight,
         contrast=args.contrast_weight,
         fired_pixels=args.fired_pixel_weight,
+        small_object_area=args.small_object_area,
         true_mask_warp=args.true_mask_warp_weight,
     )
     network.to(device)
