@@ -1,17 +1,13 @@
-"""The fired-pixel emphasis of the mask loss: which pixels fired, and how they weigh."""
-
-import json
+"""The fired-pixel emphasis of the mask loss: which pixels fired, and how they weigh (that training
+takes it: test_training)."""
 
 import numpy as np
-import pytest
 import torch
 
 from evgate_train.augment import Augmentation, apply
 from evgate_train.losses import bce_dice
 from evgate_train.sequence import load_sequence
-from evgate_train.train import TrainingSetupError, train
 from evgate_train.windows import FIRED_HALF_SPAN_US, Crop, draw_horizons, reference_input, training_window
-from test_training import _args
 
 
 def _fired_by_event(sequence, time_us, crop):
@@ -59,16 +55,3 @@ def test_emphasis_weighs_a_pixel_one_plus_its_value_in_the_bce_mean():
     torch.testing.assert_close(
         bce_dice(logits, target, valid, 0.0, 1.0, emphasis), (per_pixel[1] + 2 * per_pixel[2]) / 3
     )
-
-
-def test_training_with_fired_pixel_weight_changes_the_mask_loss(synthetic_dir, tmp_path):
-    def first_mask_loss(run, *extra):
-        train(_args(synthetic_dir, tmp_path / run, 2, *extra))
-        return json.loads((tmp_path / run / "log.jsonl").read_text().splitlines()[0])["mask"]
-
-    assert first_mask_loss("uniform") != pytest.approx(first_mask_loss("fired", "--fired-pixel-weight", "4"))
-
-
-def test_a_negative_fired_pixel_weight_is_refused(synthetic_dir, tmp_path):
-    with pytest.raises(TrainingSetupError, match="--fired-pixel-weight -1.0: must be 0"):
-        train(_args(synthetic_dir, tmp_path / "run", 2, "--fired-pixel-weight", "-1"))

@@ -1,15 +1,10 @@
-"""The small-object emphasis of the mask loss: how much each object's pixels weigh, and that
-training takes it."""
-
-import json
+"""The small-object emphasis of the mask loss: how much each object's pixels weigh."""
 
 import pytest
 import torch
 
 from evgate_train.losses import SMALL_OBJECT_MAX_FACTOR, bce_dice, small_object_emphasis
 from evgate_train.objective import LossWeights, mask_emphasis
-from evgate_train.train import TrainingSetupError, train
-from test_training import _args
 
 
 def test_small_objects_weigh_more_by_their_area_up_to_the_cap():
@@ -50,16 +45,3 @@ def test_the_fired_pixel_and_small_object_emphases_add_up():
     both = mask_emphasis(target, fired, LossWeights(fired_pixels=2.0, small_object_area=8.0))
     torch.testing.assert_close(both, 2.0 * fired + small_object_emphasis(target, 8.0))
     assert float(both[0, 0, 2, 2]) == 2.0 + 1.0
-
-
-def test_training_with_a_small_object_area_changes_the_mask_loss(synthetic_dir, tmp_path):
-    def first_mask_loss(run, *extra):
-        train(_args(synthetic_dir, tmp_path / run, 2, *extra))
-        return json.loads((tmp_path / run / "log.jsonl").read_text().splitlines()[0])["mask"]
-
-    assert first_mask_loss("pooled") != pytest.approx(first_mask_loss("small", "--small-object-area", "4000"))
-
-
-def test_a_negative_small_object_area_is_refused(synthetic_dir, tmp_path):
-    with pytest.raises(TrainingSetupError, match="--small-object-area -1.0: must be 0"):
-        train(_args(synthetic_dir, tmp_path / "run", 2, "--small-object-area", "-1"))

@@ -21,6 +21,12 @@ def _args(synthetic_dir, run_dir, steps, *extra):
     )
 
 
+def _first_mask_loss(synthetic_dir, run_dir, *extra):
+    """The mask loss logged at the first of two training steps run with `extra`."""
+    train(_args(synthetic_dir, run_dir, 2, *extra))
+    return json.loads((run_dir / "log.jsonl").read_text().splitlines()[0])["mask"]
+
+
 def test_training_logs_checkpoints_and_resumes_the_same_data_stream(synthetic_dir, tmp_path):
     straight, split = tmp_path / "straight", tmp_path / "split"
     train(_args(synthetic_dir, straight, 5))
@@ -361,3 +367,15 @@ def test_a_time_budget_drives_the_decay_when_it_is_further_along_than_the_steps(
     assert learning_rate(999, 1000, 1.0, 5, time_spent=0.0) == pytest.approx(0.1, abs=1e-3)
     # Warm-up runs on steps whatever the time spent.
     assert learning_rate(1, 1000, 1.0, 5, time_spent=0.9) == pytest.approx(0.4)
+
+
+@pytest.mark.parametrize("flag, value", [("--fired-pixel-weight", "4"), ("--small-object-area", "4000")])
+def test_each_mask_emphasis_changes_the_mask_loss(synthetic_dir, tmp_path, flag, value):
+    uniform = _first_mask_loss(synthetic_dir, tmp_path / "uniform")
+    assert uniform != pytest.approx(_first_mask_loss(synthetic_dir, tmp_path / "emphasised", flag, value))
+
+
+@pytest.mark.parametrize("flag", ["--fired-pixel-weight", "--small-object-area"])
+def test_a_negative_mask_emphasis_is_refused(synthetic_dir, tmp_path, flag):
+    with pytest.raises(TrainingSetupError, match=f"{flag} -1.0: must be 0"):
+        train(_args(synthetic_dir, tmp_path / "run", 2, flag, "-1"))
