@@ -8,7 +8,9 @@ Every sequence is streamed from its start with the recurrent state carried, as t
 does. At each 50 ms reference time t with ground truth, the current mask is scored against
 the mask at t (mIoU, pIoU, SR@0.5, R@0.5) and each forecast against the mask at t + h. The
 first model also yields the two forecast-free baselines: its current mask held still ("no
-forecast") and moved by linear extrapolation of its masks ("linear").
+forecast") and moved by linear extrapolation of its masks ("linear"); and an oracle that no
+runtime can make, its current mask moved by the true motion of each object ("true-motion",
+`true_motion`), which bounds what a better flow would give that mask.
 """
 
 import argparse
@@ -31,6 +33,7 @@ from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork
 from .network_input import network_input
 from .onnx_network import OnnxNetwork, load_export
 from .sequence import Sequence, load_sequence
+from .true_motion import true_motion_forecast
 from .voxel import WINDOW_US, padded
 
 EVIMO_LIKE = ("boxes", "floor", "wall", "table", "fast")
@@ -100,6 +103,9 @@ def evaluate_sequence(
                 scores[f"no-forecast-{horizon:g}ms"].add(frame_scores(current, truth, None))
                 moved = extrapolate(previous, current, WINDOW_US / 1000, horizon) if previous is not None else current
                 scores[f"linear-{horizon:g}ms"].add(frame_scores(moved, truth, None))
+                if now is not None:
+                    oracle = true_motion_forecast(current, sequence.masks[now], truth)
+                    scores[f"true-motion-{horizon:g}ms"].add(frame_scores(oracle, truth, None))
         previous = current
     return scores
 
