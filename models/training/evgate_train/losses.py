@@ -5,11 +5,12 @@ import torch
 import torch.nn.functional as F
 from scipy import ndimage
 
+from .metrics import EIGHT_CONNECTED
+
 CHARBONNIER_EPSILON = 1e-3
 # The most a small object's pixels weigh against a large one's (`small_object_emphasis`): a
 # component of a few pixels would otherwise outweigh whole frames.
 SMALL_OBJECT_MAX_FACTOR = 8.0
-EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
 
 
 def bce_dice(

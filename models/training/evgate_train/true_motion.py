@@ -6,8 +6,8 @@ the model's own current mask, and so splits the forecast's loss into the mask's 
 flow's.
 
 A component belongs to the true object with the most of its pixels within `REACH_PX` of that
-object at t (the higher id where two are that near); one near no object keeps still (a false positive stays one), and one whose object
-has left the frame by t + h is dropped.
+object at t (the higher id where two are that near); one near no object keeps still (a false
+positive stays one), and one whose object has left the frame by t + h is dropped.
 """
 
 import numpy as np
