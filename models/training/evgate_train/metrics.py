@@ -35,14 +35,11 @@ class FrameScores:
     miou: float
     piou: float
     success: bool
-    instances_found: int
-    instances_total: int
     predicted_px: int
     truth_px: int
     false_negative_px: int
     false_positive_px: int
-    # (area in px, found) of each ground-truth instance
-    instances: list[tuple[int, bool]] = field(default_factory=list)
+    instances: list[tuple[int, bool]]  # (area in px, found) of each ground-truth instance
 
 
 def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.ndarray | None) -> FrameScores:
@@ -59,8 +56,6 @@ def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.
         miou=float(np.mean(defined)) if defined else float("nan"),
         piou=piou,
         success=bool(np.isnan(imo) or imo >= 0.5),
-        instances_found=sum(found for _, found in instances),
-        instances_total=len(instances),
         predicted_px=int(np.count_nonzero(predicted)),
         truth_px=int(np.count_nonzero(truth)),
         false_negative_px=int(np.count_nonzero(truth & ~predicted)),
@@ -107,8 +102,6 @@ class SequenceScores:
             values = np.array([getattr(f, name) for f in self.frames], dtype=float)
             return float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
 
-        found = sum(f.instances_found for f in self.frames)
-        total = sum(f.instances_total for f in self.frames)
         truth_px = sum(f.truth_px for f in self.frames)
 
         def share_of_truth(name: str) -> float:
@@ -129,7 +122,7 @@ class SequenceScores:
             "imo_iou": mean("imo_iou"),
             "piou": mean("piou"),
             "sr50": float(np.mean([f.success for f in self.frames])) if self.frames else float("nan"),
-            "r50": found / total if total else float("nan"),
+            "r50": recall_of_band(0, None),
             **{f"r50_{name}": recall_of_band(smallest, above) for name, smallest, above in INSTANCE_AREA_BANDS},
             "area_ratio": share_of_truth("predicted_px"),
             "false_negative_share": share_of_truth("false_negative_px"),
