@@ -8,9 +8,10 @@ Every sequence is streamed from its start with the recurrent state carried, as t
 does. At each 50 ms reference time t with ground truth, the current mask is scored against
 the mask at t (mIoU, pIoU, SR@0.5, R@0.5) and each forecast against the mask at t + h. The
 first model also yields the two forecast-free baselines: its current mask held still ("no
-forecast") and moved by linear extrapolation of its masks ("linear"); and an oracle that no
-runtime can make, its current mask moved by the true motion of each object ("true-motion",
-`true_motion`), which bounds what a better flow would give that mask.
+forecast") and moved by linear extrapolation of its masks ("linear"); and two oracles that no
+runtime can make, its current mask moved per object by the true motion to t + h
+("true-motion") and by the true past motion carried on ("true-kinematics", `true_motion`),
+which bound what a better flow would give that mask.
 """
 
 import argparse
@@ -33,7 +34,7 @@ from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork
 from .network_input import network_input
 from .onnx_network import OnnxNetwork, load_export
 from .sequence import Sequence, load_sequence
-from .true_motion import true_motion_forecast
+from .true_motion import KINEMATICS_STEP_MS, true_kinematics_forecast, true_motion_forecast
 from .voxel import WINDOW_US, padded
 
 EVIMO_LIKE = ("boxes", "floor", "wall", "table", "fast")
@@ -63,7 +64,8 @@ def evaluate_sequence(
     warp_resolution: str = "full",
     flow_variants: bool = False,
 ) -> dict[str, SequenceScores]:
-    """Scores keyed "current", "future-<h>ms" (and "no-forecast-<h>ms", "linear-<h>ms"; with
+    """Scores keyed "current", "future-<h>ms" (and with the baselines "no-forecast-<h>ms",
+    "linear-<h>ms", "true-motion-<h>ms", "true-kinematics-<h>ms"; with
     `flow_variants`, "rigid-<h>ms" and "splat-<h>ms" of `flow_forecasts`); `warp_resolution` as
     the network's (an export's default is "half")."""
     network.eval()
@@ -106,6 +108,11 @@ def evaluate_sequence(
                 if now is not None:
                     oracle = true_motion_forecast(current, sequence.masks[now], truth)
                     scores[f"true-motion-{horizon:g}ms"].add(frame_scores(oracle, truth, None))
+                    past = [sequence.grid_index(t_end - round(k * KINEMATICS_STEP_MS * 1000)) for k in (2, 1)]
+                    if None not in past:
+                        history = (sequence.masks[past[0]], sequence.masks[past[1]], sequence.masks[now])
+                        oracle = true_kinematics_forecast(current, history, horizon)
+                        scores[f"true-kinematics-{horizon:g}ms"].add(frame_scores(oracle, truth, None))
         previous = current
     return scores
 

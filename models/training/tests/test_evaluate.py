@@ -18,7 +18,7 @@ def test_scores_every_reference_time_with_baselines(synthetic_dir):
     scores = evaluate_sequence(network, sequence, [50.0, 100.0], with_baselines=True)
     assert set(scores) == {
         "current", "future-50ms", "future-100ms", "no-forecast-50ms", "no-forecast-100ms", "linear-50ms", "linear-100ms",
-        "true-motion-50ms", "true-motion-100ms",
+        "true-motion-50ms", "true-motion-100ms", "true-kinematics-50ms", "true-kinematics-100ms",
     }
     # Ground truth exists at every reference time and 100 ms after each (the sequence ends 100 ms after the last).
     assert len(scores["current"].frames) == len(sequence.ref_ts)
