@@ -20,14 +20,20 @@ def bce_dice(
     dice_weight: float,
     positive_weight: float = 1.0,
     emphasis: torch.Tensor | None = None,
+    focal_gamma: float = 0.0,
 ) -> torch.Tensor:
     """BCE over valid pixels (IMO pixels weighted by `positive_weight`, and each by 1 + its
     `emphasis` where given) as a weighted mean, plus `dice_weight` x soft Dice loss; tensors
-    share one shape."""
+    share one shape. `focal_gamma` > 0 scales each pixel's BCE by (1 - p_t)^gamma, p_t the
+    probability given to its true class (the focal loss, Lin et al., ICCV 2017)."""
     valid = valid.to(logits.dtype)
     bce = F.binary_cross_entropy_with_logits(
         logits, target, reduction="none", pos_weight=torch.tensor(positive_weight, dtype=logits.dtype, device=logits.device)
     )
+    if focal_gamma > 0:
+        probability = torch.sigmoid(logits)
+        true_class_probability = probability * target + (1.0 - probability) * (1.0 - target)
+        bce = bce * (1.0 - true_class_probability).pow(focal_gamma)
     weight = valid if emphasis is None else valid * (1.0 + emphasis.to(logits.dtype))
     loss = (bce * weight).sum() / weight.sum().clamp_min(1.0)
     if dice_weight > 0:

@@ -8,7 +8,9 @@ matched (Hungarian on IoU against 8-connected predicted components) with IoU > 0
 Also (this module only): R@0.5 of small, medium and large instances (`INSTANCE_AREA_BANDS`);
 the predicted IMO area, false negatives and false positives as shares of the true IMO area,
 pooled over a sequence's frames; they tell a forecast that is too large (e.g. smeared over the
-strip a moving object uncovers) from one that is too small.
+strip a moving object uncovers) from one that is too small. The false positives farther than
+`NEAR_TRUTH_PX` from every true IMO pixel are counted apart: objects seen where there are none,
+not an object's outline drawn too wide.
 """
 
 from dataclasses import dataclass, field
@@ -21,6 +23,8 @@ EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
 # R@0.5 is also reported per band of instance area (px): the suite's objects are small, and how
 # many are found depends most on their size. (name, smallest area, first area above the band)
 INSTANCE_AREA_BANDS = (("small", 0, 200), ("medium", 200, 800), ("large", 800, None))
+NEAR_TRUTH_PX = 5
+_NEAR_TRUTH = np.ones((2 * NEAR_TRUTH_PX + 1, 2 * NEAR_TRUTH_PX + 1), dtype=bool)
 
 
 def _iou(predicted: np.ndarray, truth: np.ndarray) -> float:
@@ -39,6 +43,7 @@ class FrameScores:
     truth_px: int
     false_negative_px: int
     false_positive_px: int
+    false_positive_far_px: int  # more than NEAR_TRUTH_PX (in x or y) from every true IMO pixel
     instances: list[tuple[int, bool]]  # (area in px, found) of each ground-truth instance
 
 
@@ -60,6 +65,7 @@ def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.
         truth_px=int(np.count_nonzero(truth)),
         false_negative_px=int(np.count_nonzero(truth & ~predicted)),
         false_positive_px=int(np.count_nonzero(predicted & ~truth)),
+        false_positive_far_px=int(np.count_nonzero(predicted & ~ndimage.binary_dilation(truth, structure=_NEAR_TRUTH))),
         instances=instances,
     )
 
@@ -127,4 +133,5 @@ class SequenceScores:
             "area_ratio": share_of_truth("predicted_px"),
             "false_negative_share": share_of_truth("false_negative_px"),
             "false_positive_share": share_of_truth("false_positive_px"),
+            "false_positive_far_share": share_of_truth("false_positive_far_px"),
         }

@@ -39,6 +39,10 @@ class LossWeights:
     # The true mask at t warped by the predicted flow against the true mask at t + h: a flow
     # signal that does not depend on how good the predicted current mask is.
     true_mask_warp: float = 0.0
+    # The mask BCE's focal exponent (`bce_dice`): 0 is plain BCE. Most of S's errors are pixels
+    # it gets confidently wrong (false objects far from any true one, object pixels without
+    # events), while most pixels are easy background.
+    focal_gamma: float = 0.0
     # Below this horizon or event count the future window is too short to show motion blur.
     contrast_min_horizon_ms: float = 10.0
     contrast_min_events: int = 50
@@ -50,7 +54,13 @@ def window_objective(
     """`with_contrast=False` skips the contrast-maximisation term (`contrast_term`)."""
     valid = batch.mask_valid.view(-1, 1, 1, 1).expand_as(batch.mask)
     current = bce_dice(
-        out.mask_logits, batch.mask, valid, weights.dice, weights.positive, mask_emphasis(batch.mask, batch.fired, weights)
+        out.mask_logits,
+        batch.mask,
+        valid,
+        weights.dice,
+        weights.positive,
+        mask_emphasis(batch.mask, batch.fired, weights),
+        weights.focal_gamma,
     )
     future_valid = batch.future_valid[..., None, None].expand_as(batch.future_mask)
     future = bce_dice(
@@ -60,6 +70,7 @@ def window_objective(
         weights.dice,
         weights.positive,
         mask_emphasis(batch.future_mask, batch.future_fired, weights),
+        weights.focal_gamma,
     )
     flow = out.future_flow.flatten(0, 1)
     flow_valid = (batch.flow_valid & future_valid).flatten(0, 1)

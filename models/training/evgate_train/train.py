@@ -239,6 +239,13 @@ def build_parser() -> argparse.ArgumentParser:
         "its area times as much in the mask BCE, at most 8 times (0 = off): the frame-mean mIoU and "
         "R@0.5 count small objects as much as large ones",
     )
+    parser.add_argument(
+        "--focal-gamma",
+        type=float,
+        default=0.0,
+        help="focal exponent of the current and future mask BCE: each pixel's term scaled by (1 - p_t)^gamma, "
+        "p_t the probability of its true class (0 = plain BCE)",
+    )
     parser.add_argument("--contrast-weight", type=float, default=0.0, help="contrast-maximisation weight (0 = off)")
     parser.add_argument(
         "--true-mask-warp-weight",
@@ -483,6 +490,8 @@ def train(args: argparse.Namespace) -> Path:
         raise TrainingSetupError(f"--fired-pixel-weight {args.fired_pixel_weight}: must be 0 (uniform) or more")
     if args.small_object_area < 0:
         raise TrainingSetupError(f"--small-object-area {args.small_object_area}: must be 0 (off) or more pixels")
+    if args.focal_gamma < 0:
+        raise TrainingSetupError(f"--focal-gamma {args.focal_gamma}: must be 0 (plain BCE) or more")
     if args.init_time_conditioning is not None and (args.init_from is None or args.resume):
         raise TrainingSetupError(
             f"--init-time-conditioning {args.init_time_conditioning}: needs --init-from and no --resume "
@@ -620,6 +629,7 @@ def train(args: argparse.Namespace) -> Path:
         fired_pixels=args.fired_pixel_weight,
         small_object_area=args.small_object_area,
         true_mask_warp=args.true_mask_warp_weight,
+        focal_gamma=args.focal_gamma,
     )
     network.to(device)
     if args.channels_last:

@@ -81,6 +81,20 @@ def test_area_and_error_shares_are_pooled_over_the_sequence():
     assert summary["false_positive_share"] == pytest.approx(12 / 32)
     assert summary["false_negative_share"] == pytest.approx(8 / 32)
 
+def test_false_positives_far_from_every_true_object_are_counted_apart():
+    from evgate_train.metrics import NEAR_TRUTH_PX, SequenceScores
+
+    truth = np.zeros((30, 40), np.uint8)
+    truth[10:14, 10:14] = 1  # 16 px
+    predicted = truth > 0
+    predicted[10:14, 14 : 14 + NEAR_TRUTH_PX] = True  # an outline too wide: 4 x 5 px, near
+    predicted[25:27, 30:33] = True  # a phantom object: 6 px, far
+    scores = SequenceScores()
+    scores.add(frame_scores(predicted, truth, None))
+    summary = scores.summary()
+    assert summary["false_positive_share"] == pytest.approx((20 + 6) / 16)
+    assert summary["false_positive_far_share"] == pytest.approx(6 / 16)
+
 
 def test_error_shares_are_undefined_without_any_true_object():
     from evgate_train.metrics import SequenceScores

@@ -369,13 +369,15 @@ def test_a_time_budget_drives_the_decay_when_it_is_further_along_than_the_steps(
     assert learning_rate(1, 1000, 1.0, 5, time_spent=0.9) == pytest.approx(0.4)
 
 
-@pytest.mark.parametrize("flag, value", [("--fired-pixel-weight", "4"), ("--small-object-area", "4000")])
-def test_each_mask_emphasis_changes_the_mask_loss(synthetic_dir, tmp_path, flag, value):
+@pytest.mark.parametrize(
+    "flag, value", [("--fired-pixel-weight", "4"), ("--small-object-area", "4000"), ("--focal-gamma", "2")]
+)
+def test_each_mask_loss_option_changes_the_mask_loss(synthetic_dir, tmp_path, flag, value):
     uniform = _first_mask_loss(synthetic_dir, tmp_path / "uniform")
     assert uniform != pytest.approx(_first_mask_loss(synthetic_dir, tmp_path / "emphasised", flag, value))
 
 
-@pytest.mark.parametrize("flag", ["--fired-pixel-weight", "--small-object-area"])
-def test_a_negative_mask_emphasis_is_refused(synthetic_dir, tmp_path, flag):
+@pytest.mark.parametrize("flag", ["--fired-pixel-weight", "--small-object-area", "--focal-gamma"])
+def test_a_negative_mask_loss_option_is_refused(synthetic_dir, tmp_path, flag):
     with pytest.raises(TrainingSetupError, match=f"{flag} -1.0: must be 0"):
         train(_args(synthetic_dir, tmp_path / "run", 2, flag, "-1"))
