@@ -39,9 +39,9 @@ class LossWeights:
     # The true mask at t warped by the predicted flow against the true mask at t + h: a flow
     # signal that does not depend on how good the predicted current mask is.
     true_mask_warp: float = 0.0
-    # The mask BCE's focal exponent (`bce_dice`): 0 is plain BCE. Most of S's errors are pixels
-    # it gets confidently wrong (false objects far from any true one, object pixels without
-    # events), while most pixels are easy background.
+    # The mask BCE's focal exponent (`bce_dice`): 0 is plain BCE. Most pixels are easy
+    # background; a focal BCE spends its weight on the hard ones instead (tied in its A/B,
+    # model card).
     focal_gamma: float = 0.0
     # Below this horizon or event count the future window is too short to show motion blur.
     contrast_min_horizon_ms: float = 10.0
