@@ -24,7 +24,12 @@ EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
 # many are found depends most on their size. (name, smallest area, first area above the band)
 INSTANCE_AREA_BANDS = (("small", 0, 200), ("medium", 200, 800), ("large", 800, None))
 NEAR_TRUTH_PX = 5
-_NEAR_TRUTH = np.ones((2 * NEAR_TRUTH_PX + 1, 2 * NEAR_TRUTH_PX + 1), dtype=bool)
+
+
+def _near(truth: np.ndarray) -> np.ndarray:
+    """The pixels within NEAR_TRUTH_PX (in x and y) of a true pixel: a square dilation, as a
+    separable maximum filter (a twentieth of binary_dilation's time at 346x260)."""
+    return ndimage.maximum_filter(truth, size=2 * NEAR_TRUTH_PX + 1, mode="constant", cval=False)
 
 
 def _iou(predicted: np.ndarray, truth: np.ndarray) -> float:
@@ -65,7 +70,7 @@ def frame_scores(predicted: np.ndarray, truth_ids: np.ndarray, event_pixels: np.
         truth_px=int(np.count_nonzero(truth)),
         false_negative_px=int(np.count_nonzero(truth & ~predicted)),
         false_positive_px=int(np.count_nonzero(predicted & ~truth)),
-        false_positive_far_px=int(np.count_nonzero(predicted & ~ndimage.binary_dilation(truth, structure=_NEAR_TRUTH))),
+        false_positive_far_px=int(np.count_nonzero(predicted & ~_near(truth))),
         instances=instances,
     )
 
