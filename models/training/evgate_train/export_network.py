@@ -47,7 +47,7 @@ def export_forward(
     bottleneck = network.residual(x)
     skips = new_states[:-1][::-1]
     half_mask_logits, mask_features = network.mask_decoder.forward_with_features(
-        bottleneck, network.mask_decoder.project_skips(skips)
+        network.mask_decoder_input(bottleneck), network.mask_decoder.project_skips(skips)
     )
     # The (shape-preserving) reshape keeps ONNX Runtime from upsampling the one logit channel in
     # its blocked layout, where it is padded to a block of 8 channels: 8x the work.

@@ -18,6 +18,7 @@ from torch import nn
 from .convgru import ConvGRU
 from .decoder import Decoder, upsample
 from .flow_upsampling import ConvexUpsampling, check_flow_upsampling
+from .global_context import GlobalContext
 from .input_normalisation import check_input_normalisation, normalise_input
 from .sizes import STAGES, base_channels, stage_channels
 from .time_conditioning import TimeConditioning, check_variant
@@ -101,6 +102,9 @@ class NetworkConfig:
     # The encoder's first-stage width (each stage doubles it); None: the size's base width. The
     # decoders and the attention keep the base width, so the encoder alone grows.
     encoder_base_channels: int | None = None
+    # The mask decoder reads the bottleneck modulated by its mean over the frame
+    # (`global_context`); the flow decoder has its own global view through the attention.
+    global_context: bool = False
 
     @property
     def input_channels(self) -> int:
@@ -180,6 +184,7 @@ class SuppressionNetwork(nn.Module):
         skip_channels = channels[:-1][::-1]
         # Ends at the first stage's resolution (half the input); logits are upsampled from there.
         self.mask_decoder = Decoder(channels[-1], config.mask_decoder_width, skip_channels, 1)
+        self.global_context = GlobalContext(channels[-1]) if config.global_context else None
         self.flow_features = nn.Conv2d(channels[-1], config.attention_width, 1)
         self.time_conditioning = TimeConditioning(
             config.attention_width, config.time_conditioning, config.attention_heads
@@ -204,6 +209,9 @@ class SuppressionNetwork(nn.Module):
         if correction is None:
             return flow
         return flow + (upsample(correction) if to_full else correction)
+
+    def mask_decoder_input(self, bottleneck: torch.Tensor) -> torch.Tensor:
+        return bottleneck if self.global_context is None else self.global_context(bottleneck)
 
     def initial_states(
         self, batch: int, height: int, width: int, device: torch.device | str = "cpu"
@@ -231,7 +239,7 @@ class SuppressionNetwork(nn.Module):
         bottleneck = self.residual(x)
         skips = new_states[:-1][::-1]
         half_mask_logits, mask_features = self.mask_decoder.forward_with_features(
-            bottleneck, self.mask_decoder.project_skips(skips)
+            self.mask_decoder_input(bottleneck), self.mask_decoder.project_skips(skips)
         )
         mask_logits = upsample(half_mask_logits)
 

@@ -36,6 +36,7 @@ from .checkpoint import (
     save_checkpoint,
     with_encoder_width,
     with_flow_upsampling,
+    with_global_context,
     with_input_channels,
     with_input_normalisation,
     with_mask_decoder_width,
@@ -200,6 +201,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="the encoder's first-stage width, doubled at each stage (the size's base width for a new "
         "network); the decoders keep the base width; with --init-from the checkpoint's encoder is widened "
         "with its outputs unchanged at first; with --resume it must match the checkpoint",
+    )
+    parser.add_argument(
+        "--global-context",
+        action="store_true",
+        help="the mask decoder reads the bottleneck scaled and shifted by an MLP of its mean over the frame "
+        "(`global_context`); with --init-from the modulation starts at zero, so the checkpoint's outputs "
+        "are unchanged at first; with --resume the checkpoint must have it too",
     )
     parser.add_argument("--steps", type=int, default=20000, help="optimiser steps (the learning-rate schedule's length)")
     parser.add_argument("--streams", type=int, default=4, help="sequences played side by side (the batch)")
@@ -551,6 +559,10 @@ def train(args: argparse.Namespace) -> Path:
                 f"--encoder-base-channels {args.encoder_base_channels}: {checkpoint_path} has an encoder "
                 f"{resumed.state_channels[0]} channels wide at its first stage; a resumed run keeps its network"
             )
+        if args.global_context and not resumed.global_context:
+            raise TrainingSetupError(
+                f"--global-context: {checkpoint_path} has no global context; a resumed run keeps its network"
+            )
         continuation = checkpoint.continuation
         for records in ("log.jsonl", "val.jsonl"):
             drop_records_after(args.run_dir / records, start_step)
@@ -573,6 +585,8 @@ def train(args: argparse.Namespace) -> Path:
             network = with_spatial_gru_gates(network, args.first_spatial_gru_stage)
         if args.encoder_base_channels is not None:
             network = with_encoder_width(network, args.encoder_base_channels)
+        if args.global_context:
+            network = with_global_context(network)
         config = network.config
         log.info(
             "initialised from %s (%s, %s, %s input normalisation)",
@@ -593,6 +607,7 @@ def train(args: argparse.Namespace) -> Path:
                     FIRST_SPATIAL_GRU_STAGE if args.first_spatial_gru_stage is None else args.first_spatial_gru_stage
                 ),
                 encoder_base_channels=args.encoder_base_channels,
+                global_context=args.global_context,
             )
         )
     if args.data_workers < 0:

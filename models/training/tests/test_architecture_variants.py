@@ -1,6 +1,6 @@
-"""A wider mask decoder, 3x3 gates in the shallow ConvGRUs and a wider encoder: the ways of
-spending S's latency headroom on the current-instant mask, each added to a trained network
-without changing what it computes."""
+"""A wider mask decoder, 3x3 gates in the shallow ConvGRUs, a wider encoder and the mask
+decoder's global context: the ways of spending S's latency headroom on the current-instant mask,
+each added to a trained network without changing what it computes."""
 
 import pytest
 import torch
@@ -9,6 +9,7 @@ from evgate_train.checkpoint import (
     CheckpointError,
     with_encoder_width,
     with_flow_upsampling,
+    with_global_context,
     with_mask_decoder_width,
     with_spatial_gru_gates,
 )
@@ -127,6 +128,33 @@ def test_the_new_encoder_channels_reach_the_outputs_after_training():
     assert wide.mask_decoder.reduce.weight.grad[:, narrow_bottleneck:].abs().sum() > 0
     assert wide.flow_features.weight.grad[:, narrow_bottleneck:].abs().sum() > 0
     assert wide.mask_decoder.skip_projections[-1].weight.grad[:, 8:].abs().sum() > 0
+
+
+@pytest.mark.parametrize("warp_resolution", ["full", "half"])
+def test_global_context_starts_computing_what_the_network_did(warp_resolution):
+    torch.manual_seed(6)
+    network = _trained(NetworkConfig(size="XS", first_spatial_gru_stage=0))
+    with_context = with_global_context(network).eval()
+    assert with_context.config.global_context and with_context.global_context is not None
+    voxel, horizons = torch.randn(2, 2, HEIGHT, WIDTH), torch.tensor([[10.0, 100.0], [50.0, 20.0]])
+    _assert_same_outputs(_outputs(network, voxel, horizons, warp_resolution), _outputs(with_context, voxel, horizons, warp_resolution))
+    assert with_global_context(with_context) is with_context
+
+
+def test_global_context_opens_under_training():
+    """The modulation starts at zero; one step must open it, or the context would stay unused."""
+    torch.manual_seed(7)
+    network = with_global_context(_trained(NetworkConfig(size="XS"))).train()
+    voxel, horizons = torch.randn(2, 2, HEIGHT, WIDTH), torch.tensor([[100.0], [50.0]])
+    network(voxel, horizons, network.initial_states(2, HEIGHT, WIDTH)).mask_logits.square().mean().backward()
+    torch.optim.SGD(network.parameters(), lr=0.1).step()
+    network.eval()
+    with torch.no_grad():
+        opened = network(voxel, horizons, network.initial_states(2, HEIGHT, WIDTH)).mask_logits
+        network.global_context.modulation.weight.zero_()
+        network.global_context.modulation.bias.zero_()
+        closed = network(voxel, horizons, network.initial_states(2, HEIGHT, WIDTH)).mask_logits
+    assert (opened - closed).abs().max() > 1e-4
 
 
 def test_changes_that_would_drop_trained_weights_are_refused():

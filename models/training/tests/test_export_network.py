@@ -60,11 +60,16 @@ def test_factorised_attention_equals_per_horizon_copies(variant):
         ("position-aware", "global", "convex"),
     ],
 )
+@pytest.mark.parametrize("global_context", [False, True])
 @pytest.mark.parametrize("warp_resolution", ["half", "full"])
-def test_export_forward_equals_the_network(variant, input_normalisation, flow_upsampling, warp_resolution):
+def test_export_forward_equals_the_network(variant, input_normalisation, flow_upsampling, global_context, warp_resolution):
     torch.manual_seed(5)
     config = NetworkConfig(
-        size="XS", time_conditioning=variant, input_normalisation=input_normalisation, flow_upsampling=flow_upsampling
+        size="XS",
+        time_conditioning=variant,
+        input_normalisation=input_normalisation,
+        flow_upsampling=flow_upsampling,
+        global_context=global_context,
     )
     network = _perturbed(SuppressionNetwork(config))
     voxel = torch.randn(1, 2, HEIGHT, WIDTH)
