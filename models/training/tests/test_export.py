@@ -29,11 +29,13 @@ HEIGHT, WIDTH = 48, 96
 def exported(tmp_path_factory, request):
     """(network, session, path, warp resolution): parity holds for either warp resolution,
     either input normalisation, either flow upsampling, and a wide encoder and mask decoder with
-    3x3 gates in every ConvGRU."""
+    3x3 gates in every ConvGRU and the mask decoder's global context."""
     torch.manual_seed(1)
     warp_resolution, input_normalisation, variant = request.param
     if variant == "wide-spatial":
-        config = NetworkConfig(size="XS", mask_decoder_width_factor=2, first_spatial_gru_stage=0, encoder_base_channels=12)
+        config = NetworkConfig(
+            size="XS", mask_decoder_width_factor=2, first_spatial_gru_stage=0, encoder_base_channels=12, global_context=True
+        )
     else:
         config = NetworkConfig(size="XS", input_normalisation=input_normalisation, flow_upsampling=variant)
     network = SuppressionNetwork(config).eval()
