@@ -163,7 +163,6 @@ def with_spatial_gru_gates(network: SuppressionNetwork, first_stage: int) -> Sup
     return switched
 
 
-
 def with_global_context(network: SuppressionNetwork) -> SuppressionNetwork:
     """The same network (every weight) with the mask decoder's global context added
     (`global_context`): its modulation starts at zero, so the outputs are unchanged at first."""
@@ -174,6 +173,7 @@ def with_global_context(network: SuppressionNetwork) -> SuppressionNetwork:
     weights.update(network.state_dict())
     switched.load_state_dict(weights)
     return switched
+
 
 MASK_DECODER_PREFIX = "mask_decoder."
 # Weights that read the mask decoder's features (its heads, the convex upsampling's): their new
