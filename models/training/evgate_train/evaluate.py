@@ -34,7 +34,7 @@ from .network import WARP_RESOLUTIONS, NetworkConfig, SuppressionNetwork
 from .network_input import network_input
 from .onnx_network import OnnxNetwork, load_export
 from .sequence import Sequence, load_sequence
-from .true_motion import KINEMATICS_STEP_MS, true_kinematics_forecast, true_motion_forecast
+from .true_motion import true_history, true_kinematics_forecast, true_motion_forecast
 from .voxel import WINDOW_US, padded
 
 EVIMO_LIKE = ("boxes", "floor", "wall", "table", "fast")
@@ -108,9 +108,8 @@ def evaluate_sequence(
                 if now is not None:
                     oracle = true_motion_forecast(current, sequence.masks[now], truth)
                     scores[f"true-motion-{horizon:g}ms"].add(frame_scores(oracle, truth, None))
-                    past = [sequence.grid_index(t_end - round(k * KINEMATICS_STEP_MS * 1000)) for k in (2, 1)]
-                    if None not in past:
-                        history = (sequence.masks[past[0]], sequence.masks[past[1]], sequence.masks[now])
+                    history = true_history(sequence, t_end)
+                    if history is not None:
                         oracle = true_kinematics_forecast(current, history, horizon)
                         scores[f"true-kinematics-{horizon:g}ms"].add(frame_scores(oracle, truth, None))
         previous = current
