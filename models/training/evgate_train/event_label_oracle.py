@@ -38,12 +38,12 @@ from .voxel import WINDOW_US
 
 SPANS_MS = (5, 10, 20, 50)
 DILATIONS_PX = (0, 1, 2, 4, 8)
-FORECASTS = ("held", "true-kinematics", "true-motion")
 GROUND_TRUTH = "ground-truth"
 
 
 class OracleInputError(ValueError):
-    """A sequence without per-event labels, or a span or dilation out of range."""
+    """A sequence without per-event labels, a span, dilation or horizon out of range, or a horizon
+    off the ground-truth grid."""
 
 
 def oracle_key(span_ms: int, dilation_px: int) -> str:
@@ -51,7 +51,8 @@ def oracle_key(span_ms: int, dilation_px: int) -> str:
 
 
 def forecast_key(mask_key: str, forecast: str, horizon_ms: int) -> str:
-    """`mask_key` is an `oracle_key` or `GROUND_TRUTH`; `forecast` one of `FORECASTS`."""
+    """`mask_key` is an `oracle_key` or `GROUND_TRUTH`; `forecast` is "held", "true-kinematics" or
+    "true-motion"."""
     return f"{mask_key}-{forecast}-{horizon_ms}ms"
 
 
