@@ -39,7 +39,7 @@ pub struct SuiteArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Suite size: small (105 simulated seconds: 2 train, 1 val, 1 test and 1 test-ood sequence
-    /// of 3 s per preset, for quick checks) or full (1050 s: 40, 4, 4 and 2 per preset).
+    /// of 3 s per preset, for quick checks) or full (1302 s: 40, 4, 16 and 2 per preset).
     #[arg(long, default_value = "small")]
     pub scale: SuiteScale,
     /// Splits to generate, comma-separated: train, val, test, test-ood (default: all).
@@ -745,6 +745,43 @@ mod tests {
         assert_eq!(sequential.len(), 2 * plan.len());
         assert!(sequential[0].0.starts_with(&plan[0].name));
         assert_eq!(hashes(3), sequential);
+    }
+
+    #[test]
+    fn the_scale_help_states_each_scales_plan() {
+        use clap::Args as _;
+        let command = SuiteArgs::augment_args(clap::Command::new("suite"));
+        let help = command
+            .get_arguments()
+            .find(|argument| argument.get_id() == "scale")
+            .and_then(|argument| argument.get_help())
+            .unwrap()
+            .to_string()
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ");
+        for (scale, phrase) in [
+            (
+                SuiteScale::Small,
+                "small ({s} simulated seconds: {n} train, {n} val, {n} test and {n} test-ood",
+            ),
+            (
+                SuiteScale::Full,
+                "full ({s} s: {n}, {n}, {n} and {n} per preset)",
+            ),
+        ] {
+            let plan = suite_plan(scale);
+            let seconds: i64 = plan.iter().map(|entry| entry.duration_us).sum::<i64>() / 1_000_000;
+            let mut expected = phrase.replacen("{s}", &seconds.to_string(), 1);
+            for split in Split::ALL {
+                let count = plan
+                    .iter()
+                    .filter(|entry| entry.split == split && entry.preset == Preset::Boxes)
+                    .count();
+                expected = expected.replacen("{n}", &count.to_string(), 1);
+            }
+            assert!(help.contains(&expected), "{expected:?} not in {help:?}");
+        }
     }
 
     #[test]
