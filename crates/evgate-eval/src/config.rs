@@ -3,6 +3,8 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use evgate_model::metadata::MAX_KEEP_DILATION_PX;
+
 use crate::oms::OmsParameters;
 
 #[derive(Debug, Error, PartialEq)]
@@ -23,6 +25,8 @@ pub enum ConfigError {
     Window,
     #[error("camera-frame-tolerance-ms must be finite and ≥ 0, got {0}")]
     FrameTolerance(f64),
+    #[error("oracle-keep-dilation-px must be a whole number of pixels from 0 to {MAX_KEEP_DILATION_PX}, got {0}")]
+    OracleDilation(u16),
 }
 
 /// The OMS parameter grid searched for the best setting.
@@ -93,6 +97,10 @@ pub struct EvalConfig {
     /// truth at t + Δt when it lies at most this far away (half the 10 ms horizon step, so no
     /// frame stands in for a horizon nearer another one). The simulator's exact grid uses 0.5.
     pub camera_frame_tolerance_ms: f64,
+    /// The oracle gates with the true masks dilated by this many pixels (the keep rule's square):
+    /// an object's events fire on its edges, partly outside its mask, so undilated masks bound
+    /// the per-event scores from below, not above. 0 gates with the masks themselves.
+    pub oracle_keep_dilation_px: u16,
 }
 
 impl Default for EvalConfig {
@@ -110,6 +118,7 @@ impl Default for EvalConfig {
             event_bins_per_decade: 2,
             max_seconds_per_sequence: None,
             camera_frame_tolerance_ms: 5.0,
+            oracle_keep_dilation_px: 0,
         }
     }
 }
@@ -131,6 +140,9 @@ impl EvalConfig {
         let tolerance = self.camera_frame_tolerance_ms;
         if !tolerance.is_finite() || tolerance < 0.0 {
             return Err(ConfigError::FrameTolerance(tolerance));
+        }
+        if self.oracle_keep_dilation_px > MAX_KEEP_DILATION_PX {
+            return Err(ConfigError::OracleDilation(self.oracle_keep_dilation_px));
         }
         let last = *self.horizons_ms.last().expect("checked non-empty");
         if self.gate_span_ms == 0 || self.gate_span_ms > last {
@@ -257,6 +269,18 @@ mod tests {
         assert_eq!(
             negative.validate().unwrap_err().to_string(),
             "camera-frame-tolerance-ms must be finite and ≥ 0, got -1"
+        );
+    }
+
+    #[test]
+    fn the_oracles_keep_dilation_is_a_keep_rule_radius() {
+        let config: EvalConfig =
+            serde_json::from_str(r#"{"oracle-keep-dilation-px": 16}"#).unwrap();
+        config.validate().unwrap();
+        let wide: EvalConfig = serde_json::from_str(r#"{"oracle-keep-dilation-px": 17}"#).unwrap();
+        assert_eq!(
+            wide.validate().unwrap_err().to_string(),
+            "oracle-keep-dilation-px must be a whole number of pixels from 0 to 16, got 17"
         );
     }
 

@@ -24,7 +24,8 @@ pub enum MethodKind {
     Linear,
     /// The network (index into the run's models).
     Model(usize),
-    /// The ground-truth mask of each instant: the upper bound for gating.
+    /// The ground-truth mask of each instant, gated with the keep regions
+    /// `oracle-keep-dilation-px` draws around it.
     Oracle,
 }
 
@@ -122,7 +123,10 @@ impl MethodInfo {
     }
 
     pub fn oracle(config: &EvalConfig) -> Self {
-        let description = "ground-truth masks of every instant (upper bound for gating)".to_owned();
+        let description = match config.oracle_keep_dilation_px {
+            0 => "ground-truth masks of every instant, gated undilated".to_owned(),
+            radius => format!("ground-truth masks of every instant, gated dilated by {radius} px"),
+        };
         let horizon = f64::from(config.headline_horizon_ms);
         Self::baseline("oracle", description, MethodKind::Oracle, horizon)
     }

@@ -82,24 +82,28 @@ impl ReferenceInputs<'_> {
         if self.baseline_dilation_px == 0 {
             return Some(undilated);
         }
-        let mut scratch = DilationScratch::default();
-        let regions = undilated
-            .iter()
-            .map(|future| {
-                let mut region = Vec::new();
-                dilate_mask(
-                    future,
-                    usize::from(self.size.width),
-                    usize::from(self.size.height),
-                    usize::from(self.baseline_dilation_px),
-                    &mut scratch,
-                    &mut region,
-                );
-                region
-            })
-            .collect();
-        Some(regions)
+        Some(dilated(&undilated, self.size, self.baseline_dilation_px))
     }
+}
+
+/// Each mask dilated by `radius` pixels over the (2 radius + 1)-pixel square, as keep regions are.
+fn dilated(masks: &[Vec<bool>], size: SensorSize, radius: u16) -> Vec<Vec<bool>> {
+    let mut scratch = DilationScratch::default();
+    masks
+        .iter()
+        .map(|mask| {
+            let mut region = Vec::new();
+            dilate_mask(
+                mask,
+                usize::from(size.width),
+                usize::from(size.height),
+                usize::from(radius),
+                &mut scratch,
+                &mut region,
+            );
+            region
+        })
+        .collect()
 }
 
 /// Object ids as a moving / static mask.
@@ -164,15 +168,19 @@ impl MethodKind {
                 keep: output.keep.clone(),
                 runtime: output.runtime,
             }),
-            MethodKind::Oracle => inputs.truth_now.map(|now| MethodOutput {
-                current: to_mask(now),
-                futures: inputs
+            MethodKind::Oracle => inputs.truth_now.map(|now| {
+                let futures: Vec<Vec<bool>> = inputs
                     .truth_at_horizon
                     .iter()
                     .map(|truth| truth.map_or_else(|| vec![false; inputs.size.pixels()], to_mask))
-                    .collect(),
-                keep: None,
-                runtime: Duration::ZERO,
+                    .collect();
+                let radius = inputs.config.oracle_keep_dilation_px;
+                MethodOutput {
+                    current: to_mask(now),
+                    keep: (radius > 0).then(|| dilated(&futures, inputs.size, radius)),
+                    futures,
+                    runtime: Duration::ZERO,
+                }
             }),
         }
     }
@@ -257,6 +265,44 @@ mod tests {
                 assert_eq!(set_pixels(region, size), square, "{kind:?}");
             }
         }
+    }
+
+    #[test]
+    fn the_oracle_gates_with_the_true_masks_dilated_as_configured() {
+        let size = SensorSize::new(8, 6);
+        let mut truth = vec![0u8; size.pixels()];
+        truth[2 * 8 + 4] = 1;
+        let horizons_us = [50_000];
+        let truth_at_horizon = [Some(truth.as_slice())];
+        let output_with = |oracle_keep_dilation_px| {
+            let config = EvalConfig {
+                oracle_keep_dilation_px,
+                ..EvalConfig::default()
+            };
+            let inputs = ReferenceInputs {
+                config: &config,
+                size,
+                reference_us: 50_000,
+                horizons_us: &horizons_us,
+                window: &[],
+                current: None,
+                baseline_dilation_px: 0,
+                previous: None,
+                models: &[],
+                truth_now: Some(&truth),
+                truth_at_horizon: &truth_at_horizon,
+            };
+            MethodKind::Oracle.output(&inputs).unwrap()
+        };
+        let plain = output_with(0);
+        assert!(plain.keep.is_none());
+        assert_eq!(set_pixels(&plain.keep_regions()[0], size), vec![(4, 2)]);
+        let dilated = output_with(1);
+        assert_eq!(dilated.futures, plain.futures, "the scored masks changed");
+        assert_eq!(dilated.current, plain.current);
+        let square: Vec<(usize, usize)> =
+            (1..4).flat_map(|y| (3..6).map(move |x| (x, y))).collect();
+        assert_eq!(set_pixels(&dilated.keep_regions()[0], size), square);
     }
 
     #[test]
