@@ -962,6 +962,34 @@ mod tests {
     }
 
     #[test]
+    fn the_oracle_gated_wider_keeps_the_leading_edge() {
+        let undilated = run(small_config());
+        let dilated = run(EvalConfig {
+            oracle_keep_dilation_px: 2,
+            ..small_config()
+        });
+        let events = |report: &Report| report.overall["oracle"].events.clone();
+        // The leading edge fires ahead of the mask of the nearest 10 ms instant; 2 px reach it
+        // and take in only the few scattered background events that fall beside the object.
+        assert!(events(&dilated).recall.unwrap() > events(&undilated).recall.unwrap());
+        assert!(events(&dilated).precision.unwrap() > 0.9);
+        assert_eq!(
+            dilated.overall["oracle"].horizons, undilated.overall["oracle"].horizons,
+            "the scored masks changed"
+        );
+        let description = |report: &Report| {
+            let oracle = report.methods.iter().find(|m| m.name == "oracle").unwrap();
+            oracle.description.clone()
+        };
+        assert!(
+            description(&dilated).contains("dilated by 2 px"),
+            "{}",
+            description(&dilated)
+        );
+        assert!(description(&undilated).contains("undilated"));
+    }
+
+    #[test]
     fn linear_extrapolation_of_a_constant_velocity_beats_no_forecast() {
         let report = run(small_config());
         let at = |method: &str| report.overall[method].at(100).unwrap().clone();
