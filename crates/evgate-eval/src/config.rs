@@ -99,7 +99,8 @@ pub struct EvalConfig {
     pub camera_frame_tolerance_ms: f64,
     /// The oracle gates with the true masks dilated by this many pixels (the keep rule's square):
     /// an object's events fire on its edges, partly outside its mask, so undilated masks bound
-    /// the per-event scores from below, not above. 0 gates with the masks themselves.
+    /// the per-event scores from below, not above. 0 gates with the masks themselves. Without a
+    /// model, no-forecast and linear, which then move the true mask at t, dilate alike.
     pub oracle_keep_dilation_px: u16,
 }
 

@@ -322,7 +322,7 @@ impl Evaluation {
                 window,
                 current: current_source.as_ref(),
                 baseline_dilation_px: if model_outputs.is_empty() {
-                    0
+                    self.config.oracle_keep_dilation_px
                 } else {
                     self.models[0].forecaster.rule().keep_dilation_px
                 },
@@ -962,21 +962,27 @@ mod tests {
     }
 
     #[test]
-    fn the_oracle_gated_wider_keeps_the_leading_edge() {
+    fn the_truth_gated_wider_keeps_more_of_the_object() {
         let undilated = run(small_config());
         let dilated = run(EvalConfig {
             oracle_keep_dilation_px: 2,
             ..small_config()
         });
-        let events = |report: &Report| report.overall["oracle"].events.clone();
-        // The leading edge fires ahead of the mask of the nearest 10 ms instant; 2 px reach it
-        // and take in only the few scattered background events that fall beside the object.
-        assert!(events(&dilated).recall.unwrap() > events(&undilated).recall.unwrap());
-        assert!(events(&dilated).precision.unwrap() > 0.9);
-        assert_eq!(
-            dilated.overall["oracle"].horizons, undilated.overall["oracle"].horizons,
-            "the scored masks changed"
-        );
+        // The leading edge fires ahead of the mask of the nearest 10 ms instant, and ahead of
+        // the held or extrapolated mask at t; 2 px reach part of it and take in only a few of the
+        // scattered background events.
+        for method in ["oracle", "no-forecast", "linear"] {
+            let events = |report: &Report| report.overall[method].events.clone();
+            assert!(
+                events(&dilated).recall.unwrap() > events(&undilated).recall.unwrap(),
+                "{method}"
+            );
+            assert!(events(&dilated).precision.unwrap() > 0.9, "{method}");
+            assert_eq!(
+                dilated.overall[method].horizons, undilated.overall[method].horizons,
+                "{method}: the scored masks changed"
+            );
+        }
         let description = |report: &Report| {
             let oracle = report.methods.iter().find(|m| m.name == "oracle").unwrap();
             oracle.description.clone()

@@ -55,7 +55,7 @@ pub(crate) struct ReferenceInputs<'a> {
     pub current: Option<&'a BaselineSource>,
     /// The first model's keep dilation, by which the baselines built on its current mask dilate
     /// their forecasts of `current_keep` into keep regions too, so that their gating compares
-    /// with the model's on motion alone (0 without a model).
+    /// with the model's on motion alone (without a model, the oracle's).
     pub baseline_dilation_px: u16,
     /// The previous reference time and its source, for linear extrapolation.
     pub previous: Option<&'a (i64, BaselineSource)>,
