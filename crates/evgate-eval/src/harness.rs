@@ -972,7 +972,7 @@ mod tests {
         // the held or extrapolated mask at t; 2 px reach part of it and take in only a few of the
         // scattered background events.
         for method in ["oracle", "no-forecast", "linear"] {
-            let events = |report: &Report| report.overall[method].events.clone();
+            let events = |report: &Report| report.overall[method].events;
             assert!(
                 events(&dilated).recall.unwrap() > events(&undilated).recall.unwrap(),
                 "{method}"
